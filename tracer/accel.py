@@ -1,0 +1,108 @@
+"""The narrow interface every acceleration structure implements, and the ``build`` factory.
+
+pbrt-v2 style: ``build(scene, name, **params)`` returns a built structure with
+
+* ``intersect(origins, directions, tmin=0, tmax=None, counters=True) -> (Hits, Counters | None)``
+* ``occluded(origins, directions, tmax) -> bool array``
+* ``stats() -> dict`` (cells, refs, memory bytes, build seconds, ...)
+
+Parameters go in ``__init__`` and fitted (built) attributes end with ``_`` (scikit-learn style).
+Counting is a separately compiled variant of the same kernel source (``counters=False`` runs the
+variant with no counter code in it), so the timed path is not slowed by counting.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import NamedTuple
+
+import numpy as np
+
+from tracer.errors import GridcostError
+
+#: per-ray counter columns shared by all structures (a structure leaves the ones it lacks at 0)
+COUNTER_NAMES = ("setups", "steps", "tests", "nodes", "skips")
+
+#: structure name -> "module:Class"
+STRUCTURES = {
+    "grid": "tracer.grid:UniformGrid",
+    "nested": "tracer.nested:NestedGrid",
+    "kdtree": "tracer.kdtree:KdTree",
+    "bvh": "tracer.bvh:BVH",
+}
+
+
+class Hits(NamedTuple):
+    """Closest hits: ``t`` (float32, inf for a miss) and ``tri_id`` (int32, -1 for a miss)."""
+    t: np.ndarray
+    tri_id: np.ndarray
+
+
+class Counters:
+    """Per-ray work counters, an ``(m, 5)`` int32 array with columns :data:`COUNTER_NAMES`."""
+
+    def __init__(self, data: np.ndarray):
+        self.data = data
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.data[:, COUNTER_NAMES.index(name)]
+
+    def mean(self) -> dict[str, float]:
+        means = self.data.mean(axis=0) if len(self.data) else np.zeros(len(COUNTER_NAMES))
+        return {k: float(v) for k, v in zip(COUNTER_NAMES, means)}
+
+    def total(self) -> dict[str, int]:
+        return {k: int(v) for k, v in zip(COUNTER_NAMES, self.data.sum(axis=0, dtype=np.int64))}
+
+
+def as_rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
+    """Validate and convert a batch of rays to C-contiguous float32 ``(m, 3)`` arrays."""
+    o = np.ascontiguousarray(origins, dtype=np.float32)
+    d = np.ascontiguousarray(directions, dtype=np.float32)
+    if o.ndim != 2 or o.shape[1] != 3 or d.shape != o.shape:
+        raise GridcostError(f"rays must be two (m, 3) arrays of equal shape, got {o.shape} and {d.shape}")
+    if not (np.isfinite(o).all() and np.isfinite(d).all()):
+        raise GridcostError("rays contain NaN or inf")
+    return o, d
+
+
+def tmax_array(tmax, m: int) -> np.ndarray:
+    if tmax is None:
+        return np.full(m, np.inf, dtype=np.float32)
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, dtype=np.float32), (m,)))
+
+
+class Accel:
+    """Base class: subclasses implement ``build(scene)`` and ``_trace(o, d, tmin, tmax, anyhit, count)``."""
+
+    name = "accel"
+
+    def build(self, scene):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def intersect(self, origins, directions, tmin: float = 0.0, tmax=None, counters: bool = True):
+        o, d = as_rays(origins, directions)
+        t, ids, cnt = self._trace(o, d, float(tmin), tmax_array(tmax, len(o)), False, counters)
+        return Hits(t, ids), (Counters(cnt) if counters else None)
+
+    def occluded(self, origins, directions, tmax, tmin: float = 0.0) -> np.ndarray:
+        o, d = as_rays(origins, directions)
+        _, ids, _ = self._trace(o, d, float(tmin), tmax_array(tmax, len(o)), True, False)
+        return ids >= 0
+
+    def stats(self) -> dict:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+def build(scene, name: str = "grid", **params) -> Accel:
+    """Build structure ``name`` (one of :data:`STRUCTURES`) over ``scene`` with ``params``."""
+    if name not in STRUCTURES:
+        raise GridcostError(f"unknown structure {name!r}; known: {', '.join(STRUCTURES)}")
+    modname, clsname = STRUCTURES[name].split(":")
+    try:
+        cls = getattr(importlib.import_module(modname), clsname)
+    except ModuleNotFoundError:
+        raise GridcostError(f"structure {name!r} is not available in this build") from None
+    return cls(**params).build(scene)

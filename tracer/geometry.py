@@ -1,0 +1,185 @@
+"""Geometry kernels written once and used by every structure and by the oracle.
+
+* :func:`ray_triangle` — Moeller-Trumbore in float64 on float32 vertices. Structures and the oracle
+  call the same function, so a structure that tests the right triangle gets bit-identical t.
+* :func:`ray_box` — slab test returning the parametric overlap [t0, t1] (robust to zero directions).
+* :func:`tri_box_overlap` — Akenine-Moeller separating-axis triangle/box test (float64).
+* :func:`dda_setup` — Amanatides & Woo 3D-DDA set-up at parameter t; the one copy used by the
+  uniform grid, every level of the nested grids and the packet tracer's single-ray fallback.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tracer._jit import jit
+
+INF = np.inf
+
+
+#: rays within this cosine of a triangle's plane are grazing and count as misses: their t is
+#: numerically meaningless (every structure and the oracle agree on this, it is one function)
+PARALLEL_COS = 1e-7
+_PAR2 = PARALLEL_COS * PARALLEL_COS
+
+
+@jit(inline="always")
+def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax):
+    """Ray/triangle test (Moeller-Trumbore by Cramer's rule in the geometric-normal form Embree uses).
+    Returns t in (tmin, tmax) or inf for a miss.
+
+    Solves o + t d = a + u (b - a) + v (c - a). All arithmetic is float64 (float32 inputs widen
+    exactly); no back-face culling; edges inclusive (u, v >= 0, u + v <= 1); degenerate triangles
+    and rays within PARALLEL_COS of the triangle's plane never hit.
+    """
+    e1x = float(bx) - float(ax)
+    e1y = float(by) - float(ay)
+    e1z = float(bz) - float(az)
+    e2x = float(cx) - float(ax)
+    e2y = float(cy) - float(ay)
+    e2z = float(cz) - float(az)
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    det = dx * nx + dy * ny + dz * nz
+    if det * det <= _PAR2 * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz):
+        return INF
+    inv = 1.0 / det
+    sx = float(ax) - ox
+    sy = float(ay) - oy
+    sz = float(az) - oz
+    rx = dy * sz - dz * sy
+    ry = dz * sx - dx * sz
+    rz = dx * sy - dy * sx
+    u = -(e2x * rx + e2y * ry + e2z * rz) * inv
+    if u < 0.0 or u > 1.0:
+        return INF
+    v = (e1x * rx + e1y * ry + e1z * rz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return INF
+    t = (sx * nx + sy * ny + sz * nz) * inv
+    if t > tmin and t < tmax:
+        return t
+    return INF
+
+
+@jit(inline="always")
+def _slab(o, d, lo, hi):
+    """One axis of the slab test; a zero direction gives (-inf, inf) inside the slab, empty outside."""
+    if d == 0.0:
+        if o < lo or o > hi:
+            return INF, -INF
+        return -INF, INF
+    inv = 1.0 / d
+    a = (lo - o) * inv
+    b = (hi - o) * inv
+    if a > b:
+        return b, a
+    return a, b
+
+
+@jit(inline="always")
+def ray_box(ox, oy, oz, dx, dy, dz, x0, y0, z0, x1, y1, z1, tmin, tmax):
+    """Kay-Kajiya slab test. Returns (t0, t1); the ray misses the box when t0 > t1."""
+    a, b = _slab(ox, dx, x0, x1)
+    t0 = max(tmin, a)
+    t1 = min(tmax, b)
+    a, b = _slab(oy, dy, y0, y1)
+    t0 = max(t0, a)
+    t1 = min(t1, b)
+    a, b = _slab(oz, dz, z0, z1)
+    t0 = max(t0, a)
+    t1 = min(t1, b)
+    return t0, t1
+
+
+@jit(inline="always")
+def _axis_test(a, b, fa, fb, v0a, v0b, v2a, v2b, rad_a, rad_b):
+    p0 = a * v0a - b * v0b
+    p2 = a * v2a - b * v2b
+    mn = min(p0, p2)
+    mx = max(p0, p2)
+    rad = fa * rad_a + fb * rad_b
+    return mn > rad or mx < -rad
+
+
+@jit
+def tri_box_overlap(cx, cy, cz, hx, hy, hz, ax, ay, az, bx, by, bz, qx, qy, qz):
+    """Akenine-Moeller (2001) triangle/box overlap by the separating axis theorem, float64.
+
+    Box given by centre (cx, cy, cz) and half sizes (hx, hy, hz); returns True when they overlap
+    (touching counts as overlapping).
+    """
+    v0x = ax - cx; v0y = ay - cy; v0z = az - cz
+    v1x = bx - cx; v1y = by - cy; v1z = bz - cz
+    v2x = qx - cx; v2y = qy - cy; v2z = qz - cz
+    # 1) the three box face normals (AABB of the triangle vs the box)
+    if min(v0x, v1x, v2x) > hx or max(v0x, v1x, v2x) < -hx:
+        return False
+    if min(v0y, v1y, v2y) > hy or max(v0y, v1y, v2y) < -hy:
+        return False
+    if min(v0z, v1z, v2z) > hz or max(v0z, v1z, v2z) < -hz:
+        return False
+    e0x = v1x - v0x; e0y = v1y - v0y; e0z = v1z - v0z
+    e1x = v2x - v1x; e1y = v2y - v1y; e1z = v2z - v1z
+    e2x = v0x - v2x; e2y = v0y - v2y; e2z = v0z - v2z
+    # 2) the nine edge cross products
+    for k in range(3):
+        if k == 0:
+            ex = e0x; ey = e0y; ez = e0z
+            # vertices not on this edge's line: use v0 and v2
+            pax = v0x; pay = v0y; paz = v0z; pbx = v2x; pby = v2y; pbz = v2z
+        elif k == 1:
+            ex = e1x; ey = e1y; ez = e1z
+            pax = v0x; pay = v0y; paz = v0z; pbx = v1x; pby = v1y; pbz = v1z
+        else:
+            ex = e2x; ey = e2y; ez = e2z
+            pax = v0x; pay = v0y; paz = v0z; pbx = v1x; pby = v1y; pbz = v1z
+        fex = abs(ex); fey = abs(ey); fez = abs(ez)
+        # axis X x e = (0, -ez, ey)
+        if _axis_test(ez, ey, fez, fey, pay, paz, pby, pbz, hy, hz):
+            return False
+        # axis Y x e = (ez, 0, -ex)
+        if _axis_test(-ez, -ex, fez, fex, pax, paz, pbx, pbz, hx, hz):
+            return False
+        # axis Z x e = (-ey, ex, 0)
+        if _axis_test(ey, ex, fey, fex, pax, pay, pbx, pby, hx, hy):
+            return False
+    # 3) the triangle's plane
+    nx = e0y * e1z - e0z * e1y
+    ny = e0z * e1x - e0x * e1z
+    nz = e0x * e1y - e0y * e1x
+    d = -(nx * v0x + ny * v0y + nz * v0z)
+    r = hx * abs(nx) + hy * abs(ny) + hz * abs(nz)
+    return abs(d) <= r
+
+
+@jit(inline="always")
+def _dda_axis(o, d, t, lo, cell, inv_cell, n):
+    """One axis of the DDA set-up: cell index at parameter t, step, t of the next plane, t per cell."""
+    p = o + d * t
+    i = int(math.floor((p - lo) * inv_cell))
+    if i < 0:
+        i = 0
+    elif i > n - 1:
+        i = n - 1
+    if d > 0.0:
+        return i, 1, (lo + (i + 1) * cell - o) / d, cell / d
+    if d < 0.0:
+        return i, -1, (lo + i * cell - o) / d, -cell / d
+    return i, 0, INF, INF
+
+
+@jit(inline="always")
+def dda_setup(ox, oy, oz, dx, dy, dz, t, x0, y0, z0, cx, cy, cz, icx, icy, icz, nx, ny, nz):
+    """Amanatides & Woo (1987) 3D-DDA set-up for a grid with origin (x0, y0, z0), cell sizes c*
+    (inverses ic*) and resolution n*, for the ray point at parameter t (inside or on the grid box).
+
+    Returns (ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz): cell, steps (+1/-1/0),
+    t of the next cell plane on each axis, and t per cell on each axis.
+    """
+    ix, sx, tnx, tdx = _dda_axis(ox, dx, t, x0, cx, icx, nx)
+    iy, sy, tny, tdy = _dda_axis(oy, dy, t, y0, cy, icy, ny)
+    iz, sz, tnz, tdz = _dda_axis(oz, dz, t, z0, cz, icz, nz)
+    return ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz

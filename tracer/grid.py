@@ -1,0 +1,287 @@
+"""Uniform grid: resolution rules, exact (or bounding-box) triangle assignment in CSR form,
+3D-DDA traversal with early termination, optional mailboxing and per-ray counters.
+
+Layout (flat arrays, no Python objects): ``cell_start_`` (M + 1, int32) and ``tri_ids_`` (refs,
+int32) in CSR form, and ``tri_verts_`` (refs, 9) float32 — the triangles copied into cell order so
+a cell's triangles are read contiguously.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import prange
+
+from tracer._jit import jit, pjit
+from tracer.accel import COUNTER_NAMES, Accel
+from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
+from tracer.errors import GridcostError
+from tracer.geometry import INF, dda_setup, ray_box, ray_triangle, tri_box_overlap
+from tracer.memory import check_budget
+
+#: rays per parallel chunk (each chunk owns one mailbox)
+CHUNK = 64
+#: direct-mapped mailbox entries per chunk (power of two)
+MAILBOX = 32
+#: relative enlargement of cells in the overlap test, so rounding never drops a touching triangle
+CELL_EPS = 1e-5
+NCOUNT = len(COUNTER_NAMES)
+
+
+# ---------------------------------------------------------------- resolution rules
+def res_from_cells(bounds, cells: float) -> np.ndarray:
+    """Ize 2007 Sec 2.2: a grid of about ``cells`` cells, each as close to a cube as the bounds allow."""
+    ext = np.maximum(np.asarray(bounds[1], float) - np.asarray(bounds[0], float), 1e-30)
+    side = (float(np.prod(ext)) / max(float(cells), 1.0)) ** (1.0 / 3.0)
+    return np.maximum(1, np.round(ext / side)).astype(np.int64)
+
+
+def res_pbrt(bounds, n_tris: int, clamp: bool = True) -> np.ndarray:
+    """pbrt-v2 GridAccel: 3 N^(1/3) voxels along the longest axis (clamped at 64), cubical voxels."""
+    ext = np.asarray(bounds[1], float) - np.asarray(bounds[0], float)
+    per_unit = PBRT_GRID_VOXELS_PER_CUBE_ROOT * n_tris ** (1.0 / 3.0) / ext.max()
+    res = np.maximum(1, np.floor(ext * per_unit)).astype(np.int64)
+    return np.minimum(res, PBRT_GRID_MAX_VOXELS) if clamp else res
+
+
+def res_wald(bounds, n_tris: int, lam: float = WALD_LAMBDA) -> np.ndarray:
+    """Wald et al. 2006 Sec 3: n_x = d_x (lambda N / V)^(1/3)."""
+    ext = np.maximum(np.asarray(bounds[1], float) - np.asarray(bounds[0], float), 1e-30)
+    k = (lam * n_tris / float(np.prod(ext))) ** (1.0 / 3.0)
+    return np.maximum(1, np.round(ext * k)).astype(np.int64)
+
+
+def grid_params(bounds, res) -> np.ndarray:
+    """The float64 parameter vector the kernels take: origin, cell size, inverse cell size, bounds max."""
+    lo = np.asarray(bounds[0], np.float64)
+    hi = np.asarray(bounds[1], np.float64)
+    cell = (hi - lo) / np.asarray(res, np.float64)
+    return np.concatenate([lo, cell, 1.0 / cell, hi])
+
+
+# ---------------------------------------------------------------- build
+@jit
+def _cell_range(lo, hi, g0, ic, n):
+    i0 = int(math.floor((lo - g0) * ic - CELL_EPS))
+    i1 = int(math.floor((hi - g0) * ic + CELL_EPS))
+    return max(i0, 0), min(i1, n - 1)
+
+
+@jit
+def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
+    """Assign triangles to cells: count pass (``fill=False``: counts into cell_start[c + 1]) or fill
+    pass (``fill=True``: cell_start is the prefix sum; tri_ids filled in triangle order per cell).
+    Candidate cells come from the triangle's bounds; ``exact`` keeps only cells the triangle overlaps
+    (separating-axis test against the cell enlarged by CELL_EPS)."""
+    hx = 0.5 * gp[3] * (1.0 + 2 * CELL_EPS)
+    hy = 0.5 * gp[4] * (1.0 + 2 * CELL_EPS)
+    hz = 0.5 * gp[5] * (1.0 + 2 * CELL_EPS)
+    cursor = np.zeros(nx * ny * nz, dtype=np.int64) if fill else np.zeros(0, dtype=np.int64)
+    refs = 0
+    for t in range(tris.shape[0]):
+        ax = float(tris[t, 0, 0]); ay = float(tris[t, 0, 1]); az = float(tris[t, 0, 2])
+        bx = float(tris[t, 1, 0]); by = float(tris[t, 1, 1]); bz = float(tris[t, 1, 2])
+        cx = float(tris[t, 2, 0]); cy = float(tris[t, 2, 1]); cz = float(tris[t, 2, 2])
+        x0, x1 = _cell_range(min(ax, bx, cx), max(ax, bx, cx), gp[0], gp[6], nx)
+        y0, y1 = _cell_range(min(ay, by, cy), max(ay, by, cy), gp[1], gp[7], ny)
+        z0, z1 = _cell_range(min(az, bz, cz), max(az, bz, cz), gp[2], gp[8], nz)
+        single = x0 == x1 and y0 == y1 and z0 == z1
+        for k in range(z0, z1 + 1):
+            for j in range(y0, y1 + 1):
+                for i in range(x0, x1 + 1):
+                    if exact and not single:
+                        if not tri_box_overlap(gp[0] + (i + 0.5) * gp[3], gp[1] + (j + 0.5) * gp[4],
+                                               gp[2] + (k + 0.5) * gp[5], hx, hy, hz,
+                                               ax, ay, az, bx, by, bz, cx, cy, cz):
+                            continue
+                    c = i + nx * (j + ny * k)
+                    if fill:
+                        tri_ids[cell_start[c] + cursor[c]] = t
+                        cursor[c] += 1
+                    else:
+                        cell_start[c + 1] += 1
+                    refs += 1
+    return refs
+
+
+# ---------------------------------------------------------------- traversal
+@jit
+def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
+             cell_start, tri_ids, tv, mb, chunk):
+    """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
+
+    Returns (t, tri_id, setups, steps, tests, skips). ``mb`` is the (chunks, MAILBOX) mailbox array
+    or None (mailboxing compiled out)."""
+    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, tmax)
+    if t0 > t1:
+        return INF, -1, 0, 0, 0, 0
+    ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
+        ox, oy, oz, dx, dy, dz, t0, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
+        gp[6], gp[7], gp[8], nx, ny, nz)
+    if mb is not None:
+        for h in range(MAILBOX):
+            mb[chunk, h] = -1
+    best = float(tmax)
+    best_id = -1
+    steps = 0
+    tests = 0
+    skips = 0
+    while True:
+        c = np.uintp(ix + nx * (iy + ny * iz))
+        steps += 1
+        for r in range(cell_start[c], cell_start[c + np.uintp(1)]):
+            ru = np.uintp(r)
+            tid = tri_ids[ru]
+            if mb is not None:
+                h = tid & (MAILBOX - 1)
+                if mb[chunk, h] == tid:
+                    skips += 1
+                    continue
+                mb[chunk, h] = tid
+            tests += 1
+            t = ray_triangle(ox, oy, oz, dx, dy, dz,
+                             tv[ru, 0], tv[ru, 1], tv[ru, 2], tv[ru, 3], tv[ru, 4], tv[ru, 5],
+                             tv[ru, 6], tv[ru, 7], tv[ru, 8], tmin, best)
+            if t < best:
+                best = t
+                best_id = tid
+                if anyhit:
+                    return best, best_id, 1, steps, tests, skips
+        # leave the cell through its nearest plane
+        if tnx < tny:
+            if tnx < tnz:
+                if best <= tnx or tnx > t1:
+                    break
+                ix += sx
+                if ix < 0 or ix >= nx:
+                    break
+                tnx += tdx
+            else:
+                if best <= tnz or tnz > t1:
+                    break
+                iz += sz
+                if iz < 0 or iz >= nz:
+                    break
+                tnz += tdz
+        else:
+            if tny < tnz:
+                if best <= tny or tny > t1:
+                    break
+                iy += sy
+                if iy < 0 or iy >= ny:
+                    break
+                tny += tdy
+            else:
+                if best <= tnz or tnz > t1:
+                    break
+                iz += sz
+                if iz < 0 or iz >= nz:
+                    break
+                tnz += tdz
+    if best_id < 0:
+        best = INF
+    return best, best_id, 1, steps, tests, skips
+
+
+@pjit
+def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
+               out_t, out_id, counters, mb):
+    """Batched grid traversal, ``prange`` over chunks of CHUNK rays. ``counters`` and ``mb`` are
+    arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
+    m = O.shape[0]
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            t, tid, su, st, te, sk = grid_ray(
+                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
+                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch)
+            out_t[i] = t
+            out_id[i] = tid
+            if counters is not None:
+                counters[i, 0] = su
+                counters[i, 1] = st
+                counters[i, 2] = te
+                counters[i, 4] = sk
+
+
+class UniformGrid(Accel):
+    """One-level uniform grid (Ize 2007 Sec 2; pbrt-v2 GridAccel).
+
+    Resolution: ``cells`` (total cell count M, near-cubical cells), or ``rule='pbrt'`` (3 N^(1/3)
+    along the longest axis, ``clamp`` at 64), or ``rule='wald'`` (lambda), or an explicit ``res``.
+    ``exact`` selects triangle/box overlap (default) vs bounding-box assignment; ``mailbox`` turns
+    on per-ray mailboxing.
+    """
+
+    name = "grid"
+
+    def __init__(self, cells=None, res=None, rule=None, lam=WALD_LAMBDA, clamp=True, exact=True,
+                 mailbox=False, factor=None):
+        self.cells, self.res, self.rule, self.lam = cells, res, rule, lam
+        self.clamp, self.exact, self.mailbox, self.factor = clamp, exact, mailbox, factor
+
+    def _resolution(self, scene) -> np.ndarray:
+        if self.res is not None:
+            res = np.asarray(self.res, np.int64)
+        elif self.rule == "pbrt":
+            res = res_pbrt(scene.bounds, scene.n, self.clamp)
+        elif self.rule == "wald":
+            res = res_wald(scene.bounds, scene.n, self.lam)
+        else:
+            cells = self.cells if self.cells is not None else (self.factor or 8.0) * scene.n
+            if not np.isfinite(cells) or cells < 1:
+                raise GridcostError(f"grid cell count must be a positive number, got {cells}")
+            res = res_from_cells(scene.bounds, cells)
+        if res.shape != (3,) or (res < 1).any():
+            raise GridcostError(f"grid resolution must be three positive integers, got {res}")
+        return res
+
+    def build(self, scene):
+        res = self._resolution(scene)
+        ncell = int(np.prod(res))
+        check_budget(f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}",
+                     (ncell + 1) * 4 + scene.n * 40 * 2)
+        t_start = time.perf_counter()
+        gp = grid_params(scene.bounds, res)
+        nx, ny, nz = (int(r) for r in res)
+        cell_start = np.zeros(ncell + 1, dtype=np.int64)
+        dummy = np.zeros(0, dtype=np.int32)
+        refs = grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, dummy, False)
+        check_budget(f"a grid with {refs:,} triangle references over {ncell:,} cells of {scene.name}",
+                     (ncell + 1) * 4 + refs * 40)
+        if refs >= 2**31:
+            raise GridcostError(f"{refs:,} triangle references exceed the int32 index range")
+        np.cumsum(cell_start, out=cell_start)
+        tri_ids = np.empty(refs, dtype=np.int32)
+        grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, tri_ids, True)
+        self.cell_start_ = cell_start.astype(np.int32)
+        self.tri_ids_ = tri_ids
+        self.tri_verts_ = np.ascontiguousarray(scene.tris.reshape(-1, 9)[tri_ids])
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.res_, self.gp_, self.n_, self.refs_ = res, gp, scene.n, refs
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        m = len(o)
+        out_t = np.empty(m, np.float32)
+        out_id = np.empty(m, np.int32)
+        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        mb = np.empty(((m + CHUNK - 1) // CHUNK, MAILBOX), np.int32) if self.mailbox else None
+        nx, ny, nz = (int(r) for r in self.res_)
+        grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
+                   self.tri_verts_, out_t, out_id, cnt, mb)
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        ncell = int(np.prod(self.res_))
+        occ = np.diff(self.cell_start_)
+        return {
+            "structure": "grid", "res": [int(r) for r in self.res_], "cells": ncell,
+            "refs": int(self.refs_), "refs_per_tri": self.refs_ / max(self.n_, 1),
+            "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
+            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
+            "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,
+        }

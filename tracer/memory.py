@@ -1,0 +1,51 @@
+"""Memory guard: estimate before allocating; refuse with the estimate when over the budget."""
+from __future__ import annotations
+
+import os
+
+from tracer.constants import MEMORY_BUDGET_FRACTION
+from tracer.errors import GridcostError
+
+
+def physical_ram() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 << 30
+
+
+def _parse_bytes(text: str) -> int:
+    text = text.strip().upper()
+    mult = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    if text and text[-1] == "B":
+        text = text[:-1]
+    if text and text[-1] in mult:
+        return int(float(text[:-1]) * mult[text[-1]])
+    return int(float(text))
+
+
+def memory_budget() -> int:
+    """Bytes one structure may allocate: $GRIDCOST_MEMORY_BUDGET (e.g. '2G') or half the RAM."""
+    env = os.environ.get("GRIDCOST_MEMORY_BUDGET")
+    if env:
+        try:
+            return _parse_bytes(env)
+        except ValueError:
+            raise GridcostError(f"GRIDCOST_MEMORY_BUDGET={env!r} is not a byte count (e.g. 2G)") from None
+    return int(physical_ram() * MEMORY_BUDGET_FRACTION)
+
+
+def fmt_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if abs(n) < 1024 or unit == "TiB":
+            return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.1f} TiB"
+
+
+def check_budget(what: str, estimate: int, budget: int | None = None) -> None:
+    budget = memory_budget() if budget is None else budget
+    if estimate > budget:
+        raise GridcostError(
+            f"{what} would need about {fmt_bytes(estimate)}, over the memory budget of {fmt_bytes(budget)} "
+            f"(set GRIDCOST_MEMORY_BUDGET to raise it, or use fewer cells)")

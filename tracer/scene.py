@@ -1,0 +1,255 @@
+"""Scenes: loading meshes through trimesh, validation, the parsed-mesh cache and the named-scene
+registry (every mesh of ``MANIFEST.tsv`` plus the procedural scenes of :mod:`tracer.procedural`).
+
+Models directory: ``--models DIR`` (CLI) → ``$GRIDCOST_MODELS`` → ``../shared/models`` beside the
+repository. Parsed meshes are cached as ``.npz`` keyed by the file's sha256 under
+``$GRIDCOST_CACHE`` (default ``~/.cache/gridcost``), never in git.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import logging
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tracer.errors import GridcostError
+
+REPO = Path(__file__).resolve().parents[1]
+FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
+#: a flat axis is padded to this fraction of the largest extent
+FLAT_PAD = 1e-3
+#: every side of the bounds is pushed out by this fraction of the largest extent
+BOUNDS_PAD = 1e-5
+CACHE_VERSION = 2
+
+
+@dataclass
+class Scene:
+    """Triangles ``tris`` (N, 3, 3) float32, ``bounds`` (2, 3) float32, provenance and load report."""
+    tris: np.ndarray
+    name: str
+    source: str = ""
+    report: dict = field(default_factory=dict)
+    bounds: np.ndarray = None
+
+    def __post_init__(self):
+        self.tris = np.ascontiguousarray(self.tris, dtype=np.float32).reshape(-1, 3, 3)
+        if self.bounds is None:
+            self.bounds = scene_bounds(self.tris)
+
+    @property
+    def n(self) -> int:
+        return int(self.tris.shape[0])
+
+    def __repr__(self) -> str:
+        return f"Scene({self.name!r}, N={self.n:,}, bounds={self.bounds.tolist()})"
+
+
+def scene_bounds(tris: np.ndarray) -> np.ndarray:
+    """Axis-aligned bounds; an axis along which the mesh is flat is padded (FLAT_PAD of the extent)."""
+    v = tris.reshape(-1, 3)
+    lo = v.min(axis=0).astype(np.float64)
+    hi = v.max(axis=0).astype(np.float64)
+    ext = hi - lo
+    pad = FLAT_PAD * max(float(ext.max()), 1e-6)
+    flat = ext < pad
+    lo[flat] -= pad
+    hi[flat] += pad
+    # pad outward (BOUNDS_PAD of the largest extent) so rays through boundary vertices/edges
+    # meet the box despite rounding in the slab test
+    margin = BOUNDS_PAD * max(float(ext.max()), 1e-6)
+    return np.stack([lo - margin, hi + margin]).astype(np.float32)
+
+
+def validate(tris: np.ndarray, where: str) -> dict:
+    """Refuse empty or non-finite meshes; count (keep) zero-area triangles."""
+    if tris.size == 0:
+        raise GridcostError(f"{where}: mesh is empty (0 triangles)")
+    bad = ~np.isfinite(tris).all(axis=(1, 2))
+    if bad.any():
+        raise GridcostError(f"{where}: {int(bad.sum())} triangles have NaN or inf vertices "
+                            f"(first: triangle {int(np.flatnonzero(bad)[0])})")
+    t = tris.astype(np.float64)
+    area2 = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    return {"degenerate": int((area2 == 0).sum())}
+
+
+# ---------------------------------------------------------------- files
+def models_dir() -> Path:
+    env = os.environ.get("GRIDCOST_MODELS")
+    return Path(env).expanduser() if env else (REPO / ".." / "shared" / "models").resolve()
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("GRIDCOST_CACHE", Path.home() / ".cache" / "gridcost")).expanduser()
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _decode_strips(strips) -> np.ndarray:
+    """Triangle strips (index lists, -1 restarts) to triangles with alternating winding; strip
+    triangles with a repeated index (stitching) are dropped."""
+    out = []
+    for strip in strips:
+        strip = np.asarray(strip).ravel()
+        for run in np.split(strip, np.flatnonzero(strip < 0)):
+            run = run[run >= 0]
+            for i in range(len(run) - 2):
+                a, b, c = run[i], run[i + 1], run[i + 2]
+                if a == b or b == c or a == c:
+                    continue
+                out.append((a, b, c) if i % 2 == 0 else (b, a, c))
+    return np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+
+def _ply_strips(mesh) -> list | None:
+    raw = (getattr(mesh, "metadata", None) or {}).get("_ply_raw") or {}
+    for name, element in raw.items():
+        if "strip" in name.lower():
+            data = element.get("data", {})
+            for key, val in data.items():
+                if "vertex" in key or "indices" in key:
+                    return list(val)
+    return None
+
+
+def _read(path: Path):
+    import trimesh
+    logging.getLogger("trimesh").setLevel(logging.ERROR)
+    kwargs = {"process": False}
+    if path.suffix.lower() in (".obj", ".ply"):
+        kwargs["skip_materials"] = True  # geometry never needs textures (and Pillow may be absent)
+    try:
+        loaded = trimesh.load(str(path), **kwargs)
+    except Exception as exc:  # trimesh raises many types for malformed files
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise GridcostError(f"{path}: cannot parse ({msg})") from None
+    if isinstance(loaded, trimesh.Scene):
+        geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)] if loaded.geometry else []
+        loaded = trimesh.util.concatenate(geoms) if geoms else trimesh.Trimesh()
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise GridcostError(f"{path}: holds no triangle mesh (trimesh loaded a {type(loaded).__name__})")
+    return loaded
+
+
+def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
+    """Load a mesh file (OBJ, PLY, OFF, STL, GLB/GLTF) into a validated :class:`Scene`."""
+    path = Path(path)
+    if not path.exists():
+        raise GridcostError(f"{path}: no such file")
+    if path.is_dir():
+        raise GridcostError(f"{path}: is a directory, not a mesh file")
+    if path.suffix.lower() not in FORMATS:
+        raise GridcostError(f"{path}: unknown mesh format {path.suffix or '(no extension)'!r}; "
+                            f"known: {', '.join(sorted(FORMATS))}")
+    name = name or path.stem
+    digest = _sha256(path)
+    cfile = cache_dir() / f"{digest[:32]}-v{CACHE_VERSION}.npz"
+    if use_cache and cfile.exists():
+        try:
+            z = np.load(cfile)
+            report = {k[2:]: int(z[k]) for k in z.files if k.startswith("r_")}
+            return Scene(z["tris"], name, str(path), report)
+        except Exception:  # a corrupt cache entry is rebuilt
+            pass
+    mesh = _read(path)
+    report = {"faces_loaded": int(len(mesh.faces)), "faces_dropped": 0, "strips_decoded": 0}
+    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0:
+        strips = _ply_strips(mesh) if path.suffix.lower() == ".ply" else None
+        if strips:
+            faces = _decode_strips(strips)
+            report["strips_decoded"] = len(strips)
+            if len(faces) == 0:
+                raise GridcostError(f"{path}: triangle strips decode to 0 triangles")
+        elif len(mesh.vertices):
+            raise GridcostError(f"{path}: {len(mesh.vertices)} vertices but 0 faces "
+                                f"(faces in an unsupported element, e.g. point cloud or strips)")
+    verts = np.asarray(mesh.vertices, dtype=np.float64)
+    if len(faces) and (faces.max() >= len(verts) or faces.min() < 0):
+        raise GridcostError(f"{path}: face indices out of range (max {faces.max()}, {len(verts)} vertices)")
+    tris = verts[faces].astype(np.float32) if len(faces) else np.zeros((0, 3, 3), np.float32)
+    if np.isfinite(verts).all() and not np.isfinite(tris).all():
+        raise GridcostError(f"{path}: vertices overflow float32")
+    report.update(validate(tris, str(path)))
+    scene = Scene(tris, name, str(path), report)
+    if use_cache:
+        _atomic_savez(cfile, tris=scene.tris, **{f"r_{k}": v for k, v in report.items()})
+    return scene
+
+
+def _atomic_savez(path: Path, **arrays) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, path)
+    except OSError:  # a read-only cache is not an error
+        pass
+
+
+# ---------------------------------------------------------------- registry
+#: short names for the MANIFEST meshes whose file stem is not a good name
+ALIASES = {
+    "stanford/bun_zipper_res4.ply": "bunny-948",
+    "stanford/bun_zipper_res3.ply": "bunny-3851",
+    "stanford/bun_zipper_res2.ply": "bunny-16k",
+    "stanford/stanford-bunny.obj": "bunny-69k",
+    "stanford/dragon_vrip_res4.ply": "dragon-11k",
+    "stanford/dragon_vrip_res3.ply": "dragon-48k",
+    "stanford/dragon_vrip_res2.ply": "dragon-202k",
+    "stanford/dragon_vrip.ply": "dragon-871k",
+    "mcguire/cornell-box/CornellBox-Original.obj": "cornell",
+    "mcguire/cornell-box/CornellBox-Sphere.obj": "cornell-sphere",
+    "mcguire/cornell-box-measured/cornell_box.obj": "cornell-measured",
+    "mcguire/teapot/teapot.obj": "teapot-textured",
+}
+
+
+def manifest(models: Path | None = None) -> dict[str, dict]:
+    """Short name -> MANIFEST row (with ``path``) for every mesh listed in ``MANIFEST.tsv``."""
+    models = models or models_dir()
+    mf = models / "MANIFEST.tsv"
+    if not mf.exists():
+        return {}
+    out = {}
+    with open(mf, newline="") as f:
+        for row in csv.DictReader(f, delimiter="\t"):
+            rel = row["file"]
+            name = ALIASES.get(rel) or re.sub(r"[^a-z0-9]+", "-", Path(rel).stem.lower()).strip("-")
+            out[name] = dict(row, path=str(models / rel))
+    return out
+
+
+def scene_names() -> list[str]:
+    from tracer import procedural
+    return sorted(manifest()) + procedural.names()
+
+
+def load_scene(name_or_path: str) -> Scene:
+    """A named scene (MANIFEST short name or procedural, e.g. ``cylinder-3996``) or a mesh path."""
+    from tracer import procedural
+    spec = str(name_or_path)
+    if procedural.matches(spec):
+        return procedural.make(spec)
+    mf = manifest()
+    if spec in mf:
+        return load_mesh(mf[spec]["path"], name=spec)
+    if Path(spec).suffix or os.sep in spec:
+        return load_mesh(spec)
+    where = models_dir()
+    hint = "" if mf else f" (no MANIFEST.tsv under {where}; set --models or GRIDCOST_MODELS)"
+    raise GridcostError(f"unknown scene {spec!r}{hint}; known: {', '.join(scene_names())}")
