@@ -14,6 +14,7 @@ All three say the same thing: top-level M_1 = O(N^{3/(2L+1)}).
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from functools import lru_cache, reduce
 from operator import mul
@@ -80,6 +81,7 @@ class Result:
             "exponent": s(self.exponent), "paper": s(self.paper), "match": self.match,
             "formula_match": self.formula_match,
             "solution": {str(key): s(v) for key, v in self.solution.items()},
+            "derivatives": [s(x) for x in self.derivatives],
             "optimal_time": s(self.optimal_time),
             "time_exponent": s(self.time_exponent), "paper_time_exponent": s(self.paper_time_exponent),
             "time_match": self._eq(self.time_exponent, self.paper_time_exponent),
@@ -120,7 +122,7 @@ def _exponent_in_sub_count(quantity, n_sub):
 
 
 def _hessian_check(T, xs, sol):
-    """Second-order condition: leading principal minors of the Hessian at ``sol``; returns (smallest, all > 0)."""
+    """Second-order condition: leading principal minors of the Hessian at ``sol``; returns (minors, all > 0)."""
     H = sp.hessian(T, xs).subs(sol)
     minors = [sp.simplify(H[:i, :i].det()) for i in range(1, len(xs) + 1)]
     return minors, all(bool(mn.is_positive) for mn in minors)
@@ -349,6 +351,11 @@ def _stationary_logs(levels: int) -> dict:
     return {mj: sp.powsimp(sp.expand(sp.exp(x))) for mj, x in zip(ms, xsol)}
 
 
+def ize_d_level_top_solution(levels: int) -> dict:
+    """The exact optimum {m_j: value} of the L-level cost (see ``ize_eq16_d_level_top``)."""
+    return _stationary_logs(levels)
+
+
 @lru_cache(maxsize=None)
 def ize_eq14_three_level_cost() -> sp.Expr:
     """Eq 14:  T = T_setup + m1 T_step + k1 (T_setup + m2 T_step)
@@ -459,11 +466,6 @@ def ize_d_level_general() -> Result:
         note="L counts grid levels (L=1 one grid). Abstract's d = nesting depth = L-1 gives 3/(3+2d); the "
              "introduction's d = L gives 3/(2d+1): the same rule.",
     )
-
-
-def ize_d_level_top_solution(levels: int) -> dict:
-    """The exact optimum {m_j: value} of the L-level cost (see ``ize_eq16_d_level_top``)."""
-    return _stationary_logs(levels)
 
 
 # ------------------------------------------------------------------------- Sec 4.1 remark: scattered
@@ -618,5 +620,4 @@ def _report() -> dict:
 
 def report() -> dict:
     """``{"models": {name: {...}}}``: cost, optimum, exact exponent beside the paper's, match flags, notes."""
-    import copy
     return copy.deepcopy(_report())

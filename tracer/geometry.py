@@ -30,7 +30,7 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
     Returns t in (tmin, tmax) or inf for a miss.
 
     Solves o + t d = a + u (b - a) + v (c - a). All arithmetic is float64 (float32 inputs widen
-    exactly); no back-face culling; edges inclusive (u, v >= 0, u + v <= 1); degenerate triangles
+    exactly); no back-face culling; edges inclusive (u, v >= 0, u + v <= 1, compared as u det, v det against det); degenerate triangles
     and rays within PARALLEL_COS of the triangle's plane never hit.
     """
     e1x = float(bx) - float(ax)
@@ -45,20 +45,21 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
     det = dx * nx + dy * ny + dz * nz
     if det * det <= _PAR2 * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz):
         return INF
-    inv = 1.0 / det
     sx = float(ax) - ox
     sy = float(ay) - oy
     sz = float(az) - oz
     rx = dy * sz - dz * sy
     ry = dz * sx - dx * sz
     rz = dx * sy - dy * sx
-    u = -(e2x * rx + e2y * ry + e2z * rz) * inv
-    if u < 0.0 or u > 1.0:
+    # barycentrics scaled by det: test signs against det before paying for the division
+    un = -(e2x * rx + e2y * ry + e2z * rz)
+    vn = e1x * rx + e1y * ry + e1z * rz
+    if det > 0.0:
+        if un < 0.0 or vn < 0.0 or un + vn > det:
+            return INF
+    elif un > 0.0 or vn > 0.0 or un + vn < det:
         return INF
-    v = (e1x * rx + e1y * ry + e1z * rz) * inv
-    if v < 0.0 or u + v > 1.0:
-        return INF
-    t = (sx * nx + sy * ny + sz * nz) * inv
+    t = (sx * nx + sy * ny + sz * nz) / det
     if t > tmin and t < tmax:
         return t
     return INF

@@ -1,0 +1,45 @@
+"""Shared CLI helpers of the experiment targets: scene selection, structure parameters, JSON output."""
+from __future__ import annotations
+
+import json
+import sys
+
+from tracer.errors import GridcostError
+
+
+def add_scene_args(p, default_scene: str | None = None) -> None:
+    g = p.add_mutually_exclusive_group(required=default_scene is None)
+    g.add_argument("--mesh", help="path of a mesh file (OBJ, PLY, OFF, STL, GLB)")
+    g.add_argument("--scene", default=default_scene, help="named scene (see tracer.scene_names())")
+
+
+def scene_from_args(args):
+    from tracer.scene import load_mesh, load_scene
+    return load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
+
+
+def parse_params(items) -> dict:
+    """``key=value`` strings to a dict; values parsed as int/float/bool when they look like one."""
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise GridcostError(f"structure parameter {item!r} is not key=value")
+        k, v = item.split("=", 1)
+        low = v.lower()
+        if low in ("true", "false"):
+            out[k] = low == "true"
+            continue
+        for conv in (int, float):
+            try:
+                out[k] = conv(v)
+                break
+            except ValueError:
+                pass
+        else:
+            out[k] = v
+    return out
+
+
+def emit_json(obj) -> None:
+    json.dump(obj, sys.stdout, indent=None, default=float)
+    sys.stdout.write("\n")
