@@ -24,7 +24,8 @@ class Rays(NamedTuple):
     kind: str
     seed: int
 
-    def __len__(self) -> int:
+    @property
+    def n(self) -> int:
         return len(self.origins)
 
 

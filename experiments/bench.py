@@ -1,0 +1,135 @@
+"""``bench``: build time and Mrays/s of every structure and build/trace variant on random and camera
+rays, beside Embree (embreex) and trimesh's ray_triangle, as ratios, in one run.
+
+Warm-up call first, median of ``--repeats`` (>= 5) runs; Numba threads pinned with ``--threads``.
+Embree through embreex traces on one thread (its ``run`` loops ``rtcIntersect1``), so Embree ratios
+are per thread; trimesh is timed on a small sample of rays.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from experiments.common import add_scene_args, emit_json, scene_from_args
+from experiments.results import write_json
+from tracer.accel import build
+from tracer.rays import make_rays
+from tracer.timing import host_info, set_threads, time_call
+
+#: name -> (structure, params) of every variant benchmarked; grid cells = factor * N
+VARIANTS = {
+    "grid": ("grid", {"factor": 4.0}),
+    "grid-8N": ("grid", {"factor": 8.0}),
+    "grid-bbox": ("grid", {"factor": 4.0, "exact": False}),
+    "grid-mailbox": ("grid", {"factor": 4.0, "mailbox": True}),
+    "grid-macro": ("grid", {"factor": 4.0, "macro": 4}),
+    "nested": ("nested", {}),
+    "kdtree": ("kdtree", {}),
+    "bvh": ("bvh", {}),
+}
+
+
+def add_arguments(p) -> None:
+    add_scene_args(p, default_scene="bunny-69k")
+    p.add_argument("--rays", type=int, default=200_000, help="rays per kind (default 200000)")
+    p.add_argument("--repeats", type=int, default=5, help="timed repeats after warm-up (default 5)")
+    p.add_argument("--structures", default=",".join(VARIANTS) + ",embree,trimesh",
+                   help="comma-separated variants to run")
+    p.add_argument("--trimesh-rays", type=int, default=2000, help="rays for trimesh's tracer")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> dict:
+    t_build = time_call(accel_fn, repeats=3 if repeats > 1 else 1, warmup=0)
+    accel = accel_fn()
+    row = {"build_s": t_build.median}
+    for kind, r in rays_by_kind.items():
+        tm = time_call(lambda: accel.intersect(r.origins, r.directions, counters=False), repeats=repeats)
+        row[f"{kind}_mrays"] = r.n / tm.median / 1e6
+        row[f"{kind}_spread"] = tm.spread
+        if counters:
+            try:
+                _, cnt = accel.intersect(r.origins, r.directions, counters=True)
+                if cnt is not None:
+                    row[f"{kind}_per_ray"] = {k: round(v, 3) for k, v in cnt.mean().items()}
+            except NotImplementedError:
+                pass
+    try:
+        st = accel.stats()
+        row["stats"] = {k: v for k, v in st.items() if isinstance(v, (int, float, bool, str))}
+    except NotImplementedError:
+        pass
+    return row
+
+
+def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print) -> dict:
+    from tracer.reference import EmbreeAccel, TrimeshAccel
+    threads = set_threads(threads)
+    rays = {"random": make_rays(scene, "random", n_rays, seed=seed),
+            "camera": make_rays(scene, "camera", n_rays, seed=seed)}
+    out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
+           "host": host_info(), "structures": {}, "skipped": {}}
+    for name in names:
+        t0 = time.perf_counter()
+        try:
+            if name == "embree":
+                if not EmbreeAccel.available():
+                    out["skipped"][name] = "embreex not installed (pip install 'gridcost[embree]')"
+                    continue
+                row = _bench_one(lambda: EmbreeAccel().build(scene), rays, repeats, counters=False)
+                row["robust"] = False
+                row["threads"] = 1
+            elif name == "trimesh":
+                step = {k: max(1, r.n // trimesh_rays) for k, r in rays.items()}  # spread over the image
+                small = {k: r._replace(origins=r.origins[::step[k]][:trimesh_rays],
+                                       directions=r.directions[::step[k]][:trimesh_rays])
+                         for k, r in rays.items()}
+                try:
+                    row = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
+                except ImportError as exc:
+                    out["skipped"][name] = f"trimesh ray tracer unavailable ({exc})"
+                    continue
+                row["rays"] = trimesh_rays
+            else:
+                struct, params = VARIANTS[name]
+                row = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
+                row["params"] = params
+        except Exception as exc:  # a structure not built yet or failing must not hide the others
+            from tracer.errors import GridcostError
+            if isinstance(exc, (GridcostError, TypeError, KeyError)):
+                out["skipped"][name] = f"{type(exc).__name__}: {exc}"
+                continue
+            raise
+        out["structures"][name] = row
+        log(f"  {name:13s} build {row['build_s'] * 1e3:9.1f} ms   random {row.get('random_mrays', 0):7.3f} "
+            f"Mrays/s   camera {row.get('camera_mrays', 0):7.3f} Mrays/s   ({time.perf_counter() - t0:.0f} s)")
+    s = out["structures"]
+    ratios = {}
+    if "embree" in s:
+        e = s["embree"]
+        for name, row in s.items():
+            if name not in ("embree", "trimesh"):
+                ratios[f"{name}/embree"] = {k: row[f"{k}_mrays"] / e[f"{k}_mrays"] for k in rays}
+                ratios[f"{name}/embree"]["build"] = row["build_s"] / e["build_s"]
+    if "trimesh" in s and "grid" in s:
+        ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
+    out["ratios"] = ratios
+    return out
+
+
+def main(args) -> int:
+    scene = scene_from_args(args)
+    names = [n.strip() for n in args.structures.split(",") if n.strip()]
+    log = (lambda *a, **k: None) if args.json else print
+    log(f"bench {scene.name}: {scene.n:,} faces, {args.rays:,} rays per kind, threads={args.threads or 'all'}")
+    out = run_bench(scene, names, args.rays, max(1, args.repeats), args.threads, args.trimesh_rays, args.seed, log)
+    write_json(f"{args.out}/bench/{scene.name}-t{out['threads']}.json", out)
+    if args.json:
+        emit_json(out)
+    else:
+        for k, v in out["ratios"].items():
+            print(f"  {k:22s} " + "  ".join(f"{kk} {vv:7.3f}x" for kk, vv in v.items()))
+        for k, v in out["skipped"].items():
+            print(f"  skipped {k}: {v}")
+    return 0

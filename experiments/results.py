@@ -1,0 +1,126 @@
+"""Atomic, resumable result storage and the writers every target shares.
+
+* Every file is written to a temporary file in the same directory and renamed into place, so a
+  killed run never leaves a half-written file.
+* :class:`PointStore` keeps one small JSON file per sweep point (``results/<target>/points/``);
+  rerunning a target skips points already stored (``--force`` redoes them).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import tempfile
+import time
+from importlib import metadata
+from pathlib import Path
+
+import pandas as pd
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def atomic_write(path, data: str | bytes) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_json(path, obj) -> Path:
+    return atomic_write(path, json.dumps(obj, indent=2, default=_jsonable) + "\n")
+
+
+def write_csv(path, df: pd.DataFrame) -> Path:
+    return atomic_write(path, df.to_csv(index=False))
+
+
+def _jsonable(x):
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return str(x)
+
+
+def save_figure(fig, name: str, out_dir=None) -> list[Path]:
+    """Save ``fig`` as paper_figs/<name>.png and .pdf (atomically)."""
+    import io
+    out_dir = Path(out_dir) if out_dir else REPO / "paper_figs"
+    paths = []
+    for ext in ("png", "pdf"):
+        buf = io.BytesIO()
+        fig.savefig(buf, format=ext, dpi=150, bbox_inches="tight")
+        paths.append(atomic_write(out_dir / f"{name}.{ext}", buf.getvalue()))
+    return paths
+
+
+def git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
+                             text=True, timeout=10)
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return out.stdout.strip() + ("-dirty" if dirty else "") if out.returncode == 0 else "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def versions() -> dict:
+    out = {}
+    for pkg in ("numpy", "numba", "scipy", "sympy", "pandas", "trimesh", "matplotlib", "embreex"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def write_meta(out_dir, target: str, started: float, **extra) -> Path:
+    from tracer.timing import host_info
+    meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
+            "wall_seconds": round(time.time() - started, 2),
+            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **extra}
+    return write_json(Path(out_dir) / "meta.json", meta)
+
+
+class PointStore:
+    """One JSON file per measured point, keyed by the point's parameters."""
+
+    def __init__(self, directory, force: bool = False):
+        self.dir = Path(directory) / "points"
+        self.force = force
+
+    @staticmethod
+    def key(params: dict) -> str:
+        return hashlib.sha1(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    def get(self, params: dict):
+        if self.force:
+            return None
+        p = self.dir / f"{self.key(params)}.json"
+        if p.exists():
+            try:
+                return json.loads(p.read_text())
+            except (OSError, ValueError):
+                return None
+        return None
+
+    def put(self, params: dict, row: dict) -> dict:
+        write_json(self.dir / f"{self.key(params)}.json", row)
+        return row
+
+    def measure(self, params: dict, fn) -> tuple[dict, bool]:
+        """Stored row for ``params``, or ``fn()`` measured now and stored. Returns (row, was_cached)."""
+        row = self.get(params)
+        if row is not None:
+            return row, True
+        return self.put(params, fn()), False
