@@ -1,0 +1,191 @@
+"""Least-squares fits of the Ize 2007 cost constants to tracer measurements (scikit-learn style:
+parameters in ``__init__``, ``fit`` returns self, fitted attributes end with ``_``).
+
+* :class:`GridCostFit` — one scene's resolution sweep: T(M) = Tsetup + m Ts + (N/m^2) Ti (Eq 1,
+  ``form='compact'``) or T = Tsetup + m Ts + (N/m) Ti (Eq 5, ``form='skinny'``), non-negative least
+  squares (scipy.optimize.nnls), R^2, MAPE, bootstrap 95 % intervals, condition number, and the
+  predicted optimum M.
+* :class:`CounterCostFit` — time per ray against the tracer's counters,
+  T = Tsetup_s + Ts steps + Ti tests, pooled over scenes (one Ts, Ti; one Tsetup per scene).
+* :class:`ExponentFit` — M_best ∝ N^alpha by log-log regression with a bootstrap CI.
+* :func:`refine_minimum` — the best M of a sweep: the measured minimum refined by a parabola in log M.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import minimize_scalar, nnls
+
+from costmodel.derive import long_skinny_time, one_level_time
+
+N_BOOT = 400
+
+
+def _design_one_level(M, N, form):
+    m = np.cbrt(np.asarray(M, float))
+    N = np.broadcast_to(np.asarray(N, float), m.shape)
+    term = N / m**2 if form == "compact" else N / m
+    return np.column_stack([np.ones_like(m), m, term])
+
+
+def _metrics(y, yhat) -> dict:
+    y, yhat = np.asarray(y, float), np.asarray(yhat, float)
+    ss_res = float(((y - yhat) ** 2).sum())
+    ss_tot = float(((y - y.mean()) ** 2).sum())
+    return {"r2": 1 - ss_res / ss_tot if ss_tot > 0 else float("nan"),
+            "mape": float(np.mean(np.abs(yhat - y) / np.abs(y))) * 100}
+
+
+def _ci(samples, level=0.95):
+    lo, hi = np.nanpercentile(samples, [50 * (1 - level), 50 * (1 + level)], axis=0)
+    return lo, hi
+
+
+class GridCostFit:
+    """Fit Tsetup, Ts, Ti of Eq 1 (``form='compact'``) or Eq 5 (``form='skinny'``) to (M, T) of one
+    scene with N primitives. T is any time unit (we use ns per ray)."""
+
+    def __init__(self, form: str = "compact", n_boot: int = N_BOOT, seed: int = 0):
+        self.form, self.n_boot, self.seed = form, n_boot, seed
+
+    def fit(self, M, T, N):
+        M, T = np.asarray(M, float), np.asarray(T, float)
+        X = _design_one_level(M, N, self.form)
+        # relative least squares: weight rows by 1/T so every point of the log-spaced sweep counts
+        w = 1.0 / T
+        coef, _ = nnls(X * w[:, None], T * w)
+        self.N_ = float(N)
+        self.coef_ = coef
+        self.tsetup_, self.ts_, self.ti_ = (float(c) for c in coef)
+        self.cond_ = float(np.linalg.cond(X * w[:, None] / np.linalg.norm(X * w[:, None], axis=0)))
+        self.metrics_ = _metrics(T, X @ coef)
+        rng = np.random.default_rng(self.seed)
+        boots = []
+        for _ in range(self.n_boot):
+            idx = rng.integers(0, len(T), len(T))
+            if len(np.unique(idx)) < 3:
+                continue
+            c, _ = nnls(X[idx] * w[idx, None], T[idx] * w[idx])
+            boots.append(c)
+        boots = np.array(boots) if boots else np.full((1, 3), np.nan)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = boots[:, 2] / boots[:, 1]
+        self.ci_ = {name: tuple(float(v) for v in _ci(boots[:, i]))
+                    for i, name in enumerate(("tsetup", "ts", "ti"))}
+        self.ci_["ti_over_ts"] = tuple(float(v) for v in _ci(ratio[np.isfinite(ratio)] if np.isfinite(ratio).any() else ratio))
+        return self
+
+    @property
+    def ti_over_ts_(self) -> float:
+        return self.ti_ / self.ts_ if self.ts_ > 0 else float("inf")
+
+    def predict(self, M):
+        fn = one_level_time if self.form == "compact" else long_skinny_time
+        return fn(np.asarray(M, float), self.N_, self.tsetup_, self.ts_, self.ti_)
+
+    def optimum(self) -> float:
+        """The M minimising the fitted curve: 2 N Ti/Ts (Eq 4) or (N Ti/Ts)^1.5 (Eq 8)."""
+        r = self.ti_over_ts_
+        return 2 * self.N_ * r if self.form == "compact" else (self.N_ * r) ** 1.5
+
+    def known(self, name: str) -> bool:
+        """A constant is 'known' only when its bootstrap CI excludes zero."""
+        lo, hi = self.ci_[name]
+        return bool(lo > 0 or hi < 0)
+
+
+class CounterCostFit:
+    """T_ray = Tsetup[scene] + Ts * steps + Ti * tests, pooled over scenes (nnls, bootstrap CIs)."""
+
+    def __init__(self, n_boot: int = N_BOOT, seed: int = 0):
+        self.n_boot, self.seed = n_boot, seed
+
+    def _design(self, scenes, steps, tests):
+        cats = list(dict.fromkeys(scenes))
+        X = np.zeros((len(scenes), len(cats) + 2))
+        for j, c in enumerate(cats):
+            X[np.asarray(scenes) == c, j] = 1.0
+        X[:, -2] = steps
+        X[:, -1] = tests
+        return X, cats
+
+    def fit(self, scenes, steps, tests, T):
+        T = np.asarray(T, float)
+        X, cats = self._design(scenes, np.asarray(steps, float), np.asarray(tests, float))
+        w = 1.0 / T
+        coef, _ = nnls(X * w[:, None], T * w)
+        self.scenes_ = cats
+        self.tsetup_ = dict(zip(cats, (float(c) for c in coef[:-2])))
+        self.ts_, self.ti_ = float(coef[-2]), float(coef[-1])
+        self.coef_ = coef
+        Xw = X * w[:, None]
+        self.cond_ = float(np.linalg.cond(Xw / np.linalg.norm(Xw, axis=0)))
+        self.metrics_ = _metrics(T, X @ coef)
+        rng = np.random.default_rng(self.seed)
+        boots = []
+        for _ in range(self.n_boot):
+            idx = rng.integers(0, len(T), len(T))
+            c, _ = nnls(X[idx] * w[idx, None], T[idx] * w[idx])
+            boots.append(c[-2:])
+        boots = np.array(boots)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = boots[:, 1] / boots[:, 0]
+        self.ci_ = {"ts": tuple(float(v) for v in _ci(boots[:, 0])),
+                    "ti": tuple(float(v) for v in _ci(boots[:, 1])),
+                    "ti_over_ts": tuple(float(v) for v in _ci(ratio[np.isfinite(ratio)]))}
+        return self
+
+    @property
+    def ti_over_ts_(self) -> float:
+        return self.ti_ / self.ts_ if self.ts_ > 0 else float("inf")
+
+    def predict(self, scenes, steps, tests):
+        X, _ = self._design(scenes, np.asarray(steps, float), np.asarray(tests, float))
+        coef = np.concatenate([[self.tsetup_.get(c, np.mean(list(self.tsetup_.values()))) for c in dict.fromkeys(scenes)],
+                               [self.ts_, self.ti_]])
+        return X @ coef
+
+
+class ExponentFit:
+    """y ∝ x^alpha by least squares on logs; bootstrap 95 % CI of alpha."""
+
+    def __init__(self, n_boot: int = 2000, seed: int = 0):
+        self.n_boot, self.seed = n_boot, seed
+
+    def fit(self, x, y):
+        lx, ly = np.log(np.asarray(x, float)), np.log(np.asarray(y, float))
+        self.alpha_, self.log_c_ = (float(v) for v in np.polyfit(lx, ly, 1))
+        rng = np.random.default_rng(self.seed)
+        boots = []
+        for _ in range(self.n_boot):
+            idx = rng.integers(0, len(lx), len(lx))
+            if np.ptp(lx[idx]) == 0:
+                continue
+            boots.append(np.polyfit(lx[idx], ly[idx], 1)[0])
+        self.ci_ = tuple(float(v) for v in _ci(np.array(boots))) if boots else (float("nan"),) * 2
+        resid = ly - (self.alpha_ * lx + self.log_c_)
+        dof = max(len(lx) - 2, 1)
+        se = np.sqrt((resid**2).sum() / dof / max(((lx - lx.mean()) ** 2).sum(), 1e-300))
+        self.se_ = float(se)
+        return self
+
+    def predict(self, x):
+        return np.exp(self.log_c_) * np.asarray(x, float) ** self.alpha_
+
+
+def refine_minimum(M, T) -> float:
+    """Best M of a sweep: the measured minimum, refined by a parabola in (log M, log T) through it
+    and its neighbours (kept inside the bracket)."""
+    M, T = np.asarray(M, float), np.asarray(T, float)
+    order = np.argsort(M)
+    M, T = M[order], T[order]
+    i = int(np.argmin(T))
+    lo, hi = max(0, i - 2), min(len(M), i + 3)
+    if hi - lo < 3:
+        return float(M[i])
+    x, y = np.log(M[lo:hi]), np.log(T[lo:hi])
+    a, b, c = np.polyfit(x, y, 2)
+    if a <= 0:
+        return float(M[i])
+    res = minimize_scalar(lambda z: a * z * z + b * z + c, bounds=(x[max(0, i - lo - 1)], x[min(hi - lo - 1, i - lo + 1)]),
+                          method="bounded")
+    return float(np.exp(res.x))

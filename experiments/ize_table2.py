@@ -1,0 +1,220 @@
+"""``table2``: Ize, Shirley & Parker 2007 Table 2 — one-level grids, the theoretical M = 2N Ti/Ts
+(with Ti/Ts fitted on this machine, and with the paper's Ti/Ts = 4, i.e. M = 8N) against the best M
+found by sweeping M from N/8 to 64N; penalty = extra time of the theoretical M over the best.
+
+Rays: random rays (two uniform points on the bounding sphere, the theory's assumption) and camera
+rays as a second column. Stand-ins: the dragon at 11K / 871K triangles for the Happy Buddha
+(15,536 / 1,087,716) and the procedural ``room`` for the conference room (282,664).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum
+from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
+from tracer.constants import IZE_TI_OVER_TS
+from tracer.rays import make_rays
+from tracer.scene import load_scene
+from tracer.timing import set_threads
+
+#: our scene, the paper's model, paper N, paper empirical M, paper theoretical M (8N), paper penalty %
+PAPER = [
+    ("bunny-948", "bunny", 948, 29172, 7584, 4),
+    ("bunny-69k", "bunny", 69451, 645028, 555608, 2),
+    ("dragon-11k", "buddha", 15536, 132848, 124288, 1),
+    ("dragon-871k", "buddha", 1087716, 4873932, 8701728, 3),
+    ("room", "conference", 282664, 1121514, 2261312, 5),
+]
+QUICK_SCENES = ["bunny-948", "dragon-11k"]
+KINDS = ("random", "camera")
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the five of Table 2)")
+    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 100000; --quick 10000)")
+    p.add_argument("--repeats", type=int, default=None, help="timed repeats per point (default 5)")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _penalty(t, best):
+    return 100.0 * (t / best - 1.0)
+
+
+def run(args, log=print) -> dict:
+    started = time.time()
+    threads = set_threads(args.threads or 1)  # one pinned thread: per-ray costs without scheduling noise
+    quick = args.quick
+    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER])
+    n_rays = args.rays or (10_000 if quick else 100_000)
+    repeats = args.repeats or (5 if not quick else 3)
+    factors = QUICK_FACTORS if quick else FULL_FACTORS
+    out_dir = Path(args.out) / "table2"
+    store = PointStore(out_dir, force=args.force)
+    paper = {p[0]: p for p in PAPER}
+
+    rows, scenes, rays = [], {}, {}
+    for name in names:
+        scene = load_scene(name)
+        scenes[name] = scene
+        rays[name] = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
+        rows += sweep(scene, "grid", grid_cells(scene, factors), rays[name], store, repeats,
+                      desc=f"table2 {name}")
+    df = pd.DataFrame(rows)
+
+    # Ti/Ts on this machine: pooled counter regression over every scene's random-ray sweep
+    rnd = df[df.ray_kind == "random"]
+    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    ratio = cfit.ti_over_ts_
+
+    # measure the extra points: refined best M and the fitted-theory M, for each scene and kind
+    extra = []
+    for name, scene in scenes.items():
+        sub = df[(df.scene == name)]
+        pts = {2.0 * scene.n * ratio}
+        for kind in KINDS:
+            k = sub[sub.ray_kind == kind]
+            pts.add(refine_minimum(k.cells, k.ns_per_ray))
+        extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in sorted(pts)], rays[name], store,
+                       repeats, desc=f"table2 {name} (refine)")
+    df = pd.concat([df, pd.DataFrame(extra)], ignore_index=True)
+
+    table, fits = [], []
+    for name, scene in scenes.items():
+        p = paper.get(name, (name, "-", None, None, None, None))
+        entry = {"scene": name, "paper_model": p[1], "N": scene.n, "paper_N": p[2]}
+        for kind in KINDS:
+            k = df[(df.scene == name) & (df.ray_kind == kind)]
+            best = k.loc[k.ns_per_ray.idxmin()]
+            at = lambda m: k.iloc[int(np.argmin(np.abs(np.log(k.param_cells.values / m))))]  # noqa: E731
+            r8 = at(8.0 * scene.n)
+            rf = at(2.0 * scene.n * ratio)
+            g = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
+            fits.append({"scene": name, "ray_kind": kind, "tsetup_ns": g.tsetup_, "ts_ns": g.ts_, "ti_ns": g.ti_,
+                         "ti_over_ts": g.ti_over_ts_, "ti_over_ts_ci": g.ci_["ti_over_ts"], "r2": g.metrics_["r2"],
+                         "mape_pct": g.metrics_["mape"], "cond": g.cond_, "m_pred_eq4": g.optimum()})
+            suffix = "" if kind == "random" else f"_{kind}"
+            entry.update({
+                f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.ns_per_ray,
+                f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": _penalty(rf.ns_per_ray, best.ns_per_ray),
+                f"theory_M_8N{suffix}": int(r8.cells), f"penalty_8N_pct{suffix}": _penalty(r8.ns_per_ray, best.ns_per_ray),
+            })
+        entry.update({"paper_empirical_M": p[3], "paper_theory_M": p[4], "paper_penalty_pct": p[5]})
+        table.append(entry)
+    tab = pd.DataFrame(table)
+    fit_df = pd.DataFrame(fits)
+
+    write_csv(out_dir / "table2.csv", df)
+    write_csv(out_dir / "table2_summary.csv", tab)
+    write_csv(out_dir / "fits.csv", fit_df)
+    summary = _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, args.seed)
+    atomic_write(out_dir / "summary.md", summary)
+    _figure(df, fit_df, scenes, ratio)
+    write_meta(out_dir, "table2", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
+               ray_kinds=list(KINDS), sweep_factors=factors, scenes=names, quick=quick,
+               fitted_ti_over_ts=ratio, fitted_ts_ns=cfit.ts_, fitted_ti_ns=cfit.ti_,
+               fitted_ci=cfit.ci_, fit_cond=cfit.cond_)
+    log(summary)
+    return {"table": tab, "fits": fit_df, "ratio": ratio}
+
+
+def _verdict(worst, worst_fit) -> str:
+    if max(worst, worst_fit) <= 5:
+        return ("The runtime curve is flat near its minimum, so both theoretical choices of M stay within "
+                "the paper's 5 %.")
+    return (f"At least one scene is above the paper's 5 % ({worst:.1f} % for 8N, {worst_fit:.1f} % for the "
+            "fitted ratio): look at the per-scene curves in paper_figs/table2.png — a penalty this size "
+            "means either a curve that is not flat at its minimum (small N, where M is a few hundred cells "
+            "and the integer resolution jumps) or timing noise (check the spread column in table2.csv).")
+
+
+def _fmt(v, pct=False):
+    if v is None or (isinstance(v, float) and np.isnan(v)):
+        return "–"
+    if pct:
+        return f"{v:.1f}%"
+    return f"{int(v):,}"
+
+
+def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed) -> str:
+    lines = [
+        "# Table 2 (Ize, Shirley & Parker 2007): one-level grid, theoretical M vs best swept M", "",
+        f"Random rays ({n_rays:,} per point, seed {seed}; camera rays as second column), median of {repeats} "
+        f"timed runs after a warm-up, {threads} thread(s). Sweep M = N/8 … 64N, best M refined by a parabola in log M.",
+        "",
+        f"Ti/Ts fitted on this machine (pooled over scenes, time per ray against the tracer's steps and tests): "
+        f"**{ratio:.2f}** (95 % CI {cfit.ci_['ti_over_ts'][0]:.2f}–{cfit.ci_['ti_over_ts'][1]:.2f}; "
+        f"Ts = {cfit.ts_:.1f} ns/step, Ti = {cfit.ti_:.1f} ns/test, R² {cfit.metrics_['r2']:.3f}, "
+        f"condition number {cfit.cond_:.1f}) — the paper's is 4, giving M = 8N.", "",
+        "| model (paper) | N ours (paper) | empirical M ours (paper) | theoretical M fitted, penalty | "
+        "M = 8N ours (paper), penalty ours (paper) | camera rays: empirical M, 8N penalty |",
+        "|---|---|---|---|---|---|",
+    ]
+    for _, r in tab.iterrows():
+        lines.append(
+            f"| {r.scene} ({r.paper_model}) | {_fmt(r.N)} ({_fmt(r.paper_N)}) | {_fmt(r.empirical_M)} ({_fmt(r.paper_empirical_M)}) "
+            f"| {_fmt(r.theory_M_fitted)}, {_fmt(r.penalty_fitted_pct, True)} "
+            f"| {_fmt(r.theory_M_8N)} ({_fmt(r.paper_theory_M)}), {_fmt(r.penalty_8N_pct, True)} ({_fmt(r.paper_penalty_pct, True)}) "
+            f"| {_fmt(r.empirical_M_camera)}, {_fmt(r.penalty_8N_pct_camera, True)} |")
+    worst = tab.penalty_8N_pct.max()
+    worst_fit = tab.penalty_fitted_pct.max()
+    rel = (tab.empirical_M / tab.N).round(1).tolist()
+    lines += ["", "## Reading", "",
+              f"Best M per triangle here: {', '.join(f'{v}N' for v in rel)} (paper: 4–31N on bunny 948, "
+              f"about 4–9N otherwise). The theory's M = 8N costs at most {worst:.1f} % over the best M "
+              f"(paper: ≤ 5 %), and M = 2N·Ti/Ts with our fitted ratio costs at most {worst_fit:.1f} %. "
+              f"Our Ti/Ts ({ratio:.2f}) differs from the paper's 4 because a step and a test cost "
+              "different amounts on this CPU and in this tracer (Numba, float64 Moeller-Trumbore on float32 "
+              "data, triangles copied into cell order so a test is mostly arithmetic, while a step pays a "
+              "branchy DDA update and two index loads). " + _verdict(worst, worst_fit) +
+              " Dragon and room stand in for Buddha and the conference room, so their N and M differ from "
+              "the paper's rows by construction.", "",
+              "Per-scene fits of Eq 1 (runtime against m; constants absorb everything, so they differ "
+              "from the pooled counter fit; a ratio whose CI is wide is not a known number):", "",
+              "| scene | rays | Tsetup ns | Ts ns | Ti ns | Ti/Ts (95 % CI) | R² | MAPE | cond |", "|---|---|---|---|---|---|---|---|---|"]
+    for _, f in fit_df.iterrows():
+        lo, hi = f.ti_over_ts_ci
+        lines.append(f"| {f.scene} | {f.ray_kind} | {f.tsetup_ns:.0f} | {f.ts_ns:.2f} | {f.ti_ns:.2f} | "
+                     f"{f.ti_over_ts:.2f} ({lo:.2f}–{hi:.2f}) | {f.r2:.3f} | {f.mape_pct:.1f}% | {f.cond:.0f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _figure(df, fit_df, scenes, ratio):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    n = len(scenes)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 2.8), squeeze=False)
+    for ax, (name, scene) in zip(axes[0], scenes.items()):
+        for kind, mk in (("random", "o"), ("camera", "s")):
+            k = df[(df.scene == name) & (df.ray_kind == kind)].sort_values("cells")
+            ax.plot(k.cells / scene.n, k.ns_per_ray, mk, ms=3, label=f"{kind} (measured)")
+            g = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
+            Ms = np.geomspace(k.cells.min(), k.cells.max(), 200)
+            ax.plot(Ms / scene.n, g.predict(Ms), "-", lw=1, label=f"{kind} Eq 1 fit")
+        ax.axvline(8, color="k", ls=":", lw=1, label="M = 8N (paper)")
+        ax.axvline(2 * ratio, color="r", ls="--", lw=1, label=f"M = 2N·Ti/Ts = {2 * ratio:.1f}N")
+        ax.set_xscale("log")
+        ax.set_title(f"{name} (N = {scene.n:,})", fontsize=8)
+        ax.set_xlabel("cells per triangle M/N")
+        ax.tick_params(labelsize=7)
+    axes[0][0].set_ylabel("time per ray (ns)")
+    axes[0][-1].legend(fontsize=6)
+    fig.tight_layout()
+    save_figure(fig, "table2")
+    plt.close(fig)
+
+
+def main(args) -> int:
+    run(args, log=(lambda *a: None) if args.json else print)
+    if args.json:
+        import json
+        import sys
+        tab = pd.read_csv(Path(args.out) / "table2" / "table2_summary.csv")
+        json.dump({"rows": tab.to_dict(orient="records")}, sys.stdout, default=float)
+        print()
+    return 0

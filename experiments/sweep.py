@@ -1,0 +1,66 @@
+"""Sweep points: build a structure at given parameters once, trace every ray set on it, one row per
+(point, ray kind). Rows are stored as soon as measured (:class:`experiments.results.PointStore`)."""
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+from tqdm import tqdm
+
+from experiments.results import PointStore
+from tracer.accel import build
+from tracer.timing import time_call
+
+QUICK_FACTORS = [2.0**k for k in range(-3, 7)]              # N/8 ... 64N, 10 points
+FULL_FACTORS = [2.0 ** (k / 2) for k in range(-6, 13)]      # N/8 ... 64N, 19 points
+
+
+def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: int = 5) -> list[dict]:
+    """Build once; for each ray kind time ``repeats`` traces (after a warm-up) and count work."""
+    import numba
+    accel = build(scene, structure, **params)
+    st = accel.stats()
+    rows = []
+    for kind, r in rays_by_kind.items():
+        tm = time_call(lambda: accel.intersect(r.origins, r.directions, counters=False), repeats=repeats)
+        _, cnt = accel.intersect(r.origins, r.directions, counters=True)
+        mean = cnt.mean()
+        rows.append({
+            "scene": scene.name, "N": scene.n, "structure": structure,
+            **{f"param_{k}": v for k, v in params.items()},
+            "cells": st.get("cells"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
+            "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
+            "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds": tm.median, "seconds_min": tm.min,
+            "spread": tm.spread, "ns_per_ray": tm.median / r.n * 1e9,
+            **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},
+            "hits": float((accel.intersect(r.origins[:2000], r.directions[:2000], counters=False)[0].tri_id >= 0).mean()),
+            "threads": numba.get_num_threads(), "worker": socket.gethostname(),
+        })
+    return rows
+
+
+def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, store: PointStore,
+          repeats: int = 5, desc: str | None = None, extra_key: dict | None = None) -> list[dict]:
+    """Measure every parameter set (skipping stored ones), with a tqdm bar; returns all rows."""
+    rows = []
+    bar = tqdm(param_list, desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
+               disable=None, dynamic_ncols=True)
+    for params in bar:
+        key = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
+               "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
+               **(extra_key or {})}
+        got, _ = store.measure(key, lambda: {"rows": measure(scene, structure, params, rays_by_kind, repeats)})
+        rows.extend(got["rows"])
+    return rows
+
+
+def grid_cells(scene, factors) -> list[dict]:
+    return [{"cells": float(f * scene.n)} for f in factors]
+
+
+def best_row(rows: list[dict]) -> dict:
+    return min(rows, key=lambda r: r["seconds"])
+
+
+def as_arrays(rows, *cols):
+    return tuple(np.array([r[c] for r in rows], float) for c in cols)

@@ -1,0 +1,526 @@
+"""SAH kd-tree as pbrt-v2's ``KdTreeAccel`` builds it, and pbrt's front-to-back traversal.
+
+Build (Numba, O(N log N)): pbrt-v2's sorted-edge sweep, with the sort done once. The 2N bound
+edges of every axis are sorted once at the root (key: t, then START before END, as pbrt's
+``BoundEdge::operator<``); a node's three edge lists are stable-filtered into its children, so
+every node sees its edges already sorted and the per-node work is linear (pbrt re-sorts at every
+node: O(N log^2 N), same trees). Per node, exactly as pbrt-v2:
+
+* leaf when ``n <= max_prims`` or the depth budget is spent (max depth
+  ``round(8 + 1.3 * floor(log2 N))`` — pbrt's ``Log2Int`` is the floor);
+* SAH sweep over the edges strictly inside the node along the axis of largest extent; the other
+  two axes are tried (``retries``) only when that axis has no candidate plane;
+  cost = traversal + isect * (1 - bonus) * (pB nB + pA nA), bonus = ``empty_bonus`` when a side is
+  empty (80 / 1 / 0.5 by default, :mod:`tracer.constants`);
+* ``bad_refines`` counts splits costlier than the leaf (isect * n); leaf when the best cost is
+  > 4 x leaf cost with n < 16, or no plane, or the third bad refine;
+* primitives with a START edge before the split edge go below, those with an END edge after it
+  go above (straddlers, and triangles lying in the plane, go to one or both sides so that every
+  triangle is on each side it touches). Triangles are not clipped: edges are their full bounds.
+
+Layout: ``nodes_`` (nodes, 2) int32, depth-first with the below child at ``i + 1`` (pbrt):
+interior ``[axis | above_child << 2, split bits (float32)]``, leaf ``[3 | count << 2, offset]``;
+``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's
+triangle indices in leaf order and ``tri_verts_`` (refs, 9) float32 the triangles copied in that
+order.
+
+Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
+per chunk of rays), early exit once the closest hit is before the next node's t-range; the
+any-hit variant stops at the first hit. Plane distances are float64 and every comparison of a
+plane or a hit with a node's t-range is widened by ``tol`` (1e-7 of the ray's t scale), so
+rounding can only add node visits, never lose a hit. Counters: ``setups`` 1 per ray meeting the
+root box, ``steps`` leaves visited, ``tests`` triangle tests, ``nodes`` nodes visited
+(interior + leaf).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import prange
+
+from tracer._jit import jit, pjit
+from tracer.accel import COUNTER_NAMES, Accel
+from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
+                              PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
+from tracer.errors import GridcostError
+from tracer.geometry import INF, ray_box, ray_triangle
+from tracer.memory import check_budget
+
+#: rays per parallel chunk (each chunk owns one todo stack)
+CHUNK = 64
+#: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons
+T_EPS = 1e-7
+NCOUNT = len(COUNTER_NAMES)
+LEAF = 3
+
+
+def pbrt_max_depth(n: int) -> int:
+    """pbrt-v2: ``Round2Int(8 + 1.3f * Log2Int(float(N)))`` with Log2Int = floor(log2)."""
+    lg = math.floor(math.log2(n)) if n >= 1 else 0
+    return int(math.floor(PBRT_KD_DEPTH_A + PBRT_KD_DEPTH_B * lg + 0.5))
+
+
+# ---------------------------------------------------------------- build
+def sorted_edges(lo: np.ndarray, hi: np.ndarray):
+    """Per axis, the 2N bound edges sorted by (t, START before END, primitive): t (3, 2N) float32
+    and code (3, 2N) int32 = prim << 1 | is_end."""
+    n = lo.shape[0]
+    t_out = np.empty((3, 2 * n), np.float32)
+    c_out = np.empty((3, 2 * n), np.int32)
+    prim = np.arange(n, dtype=np.int64)
+    code = np.concatenate([prim << 1, (prim << 1) | 1])
+    for a in range(3):
+        t = np.concatenate([lo[:, a], hi[:, a]]).astype(np.float32)
+        t[t == 0] = 0.0  # -0.0 -> +0.0 so the bit key orders like the float compare
+        b = t.view(np.uint32).astype(np.uint64)
+        b = np.where(b >> 31, b ^ 0xFFFFFFFF, b | 0x80000000)  # monotone float -> uint key
+        key = (b << 32) | code.astype(np.uint64)  # t, then type (low bit), then prim
+        order = np.argsort(key, kind="stable")
+        t_out[a] = t[order]
+        c_out[a] = code[order]
+    return t_out, c_out
+
+
+@jit
+def _grow_i32(a, need):
+    if need <= a.shape[0]:
+        return a
+    b = np.empty(max(need, a.shape[0] * 3 // 2 + 16), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@jit
+def _grow_f32(a, need):
+    if need <= a.shape[0]:
+        return a
+    b = np.empty(max(need, a.shape[0] * 3 // 2 + 16), a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+@jit
+def _area(b):
+    dx = b[3] - b[0]
+    dy = b[4] - b[1]
+    dz = b[5] - b[2]
+    return 2.0 * (dx * dy + dy * dz + dz * dx)
+
+
+@jit
+def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_cost, empty_bonus):
+    """pbrt-v2 KdTreeAccel::buildTree, iterative, on pre-sorted edge lists (see module doc).
+
+    ``ev_t``/``ev_c`` (3, cap) hold the root's sorted edges in [0, 2N); the tail is the work area
+    (children's edge lists are written there, stack-like). Returns (node word 0, node word 1,
+    split, leaf prim ids, node count, leaf-ref count, leaves, empty leaves, max depth reached,
+    SAH sums: interior area, leaf area, leaf area x count; root area)."""
+    cap = ev_t.shape[1]
+    flag = np.zeros(max(n_prims, 1), np.uint8)
+    w0 = np.empty(max(16, 2 * n_prims), np.int32)
+    w1 = np.empty(max(16, 2 * n_prims), np.int32)
+    spl = np.empty(max(16, 2 * n_prims), np.float32)
+    leaf_ids = np.empty(max(16, 2 * n_prims), np.int32)
+    nnodes = 0
+    nrefs = 0
+    nleaves = 0
+    nempty = 0
+    depth_reached = 0
+    s_inner = 0.0
+    s_leaf = 0.0
+    s_tests = 0.0
+    ns = max_depth + 2
+    st_base = np.empty(ns, np.int64)
+    st_n = np.empty(ns, np.int64)
+    st_depth = np.empty(ns, np.int64)
+    st_bad = np.empty(ns, np.int64)
+    st_parent = np.empty(ns, np.int64)
+    st_bounds = np.empty((ns, 6), np.float64)
+    sp = 0
+    bounds = np.empty(6, np.float64)
+    for k in range(6):
+        bounds[k] = root[k]
+    root_area = _area(bounds)
+    base = 0
+    n = n_prims
+    depth = max_depth
+    bad = 0
+    parent = -1
+    while True:
+        node = nnodes
+        nnodes += 1
+        if nnodes > w0.shape[0]:
+            w0 = _grow_i32(w0, nnodes)
+            w1 = _grow_i32(w1, nnodes)
+            spl = _grow_f32(spl, nnodes)
+        if parent >= 0:
+            w0[parent] |= node << 2
+        depth_reached = max(depth_reached, max_depth - depth)
+        area = _area(bounds)
+        make_leaf = n <= max_prims or depth == 0
+        best_axis = -1
+        best_off = -1
+        if not make_leaf:
+            best_cost = INF
+            old_cost = isect_cost * n
+            inv_total = 1.0 / area
+            dx = bounds[3] - bounds[0]
+            dy = bounds[4] - bounds[1]
+            dz = bounds[5] - bounds[2]
+            if dx > dy and dx > dz:
+                axis = 0
+            elif dy > dz:
+                axis = 1
+            else:
+                axis = 2
+            for retries in range(3):
+                lo_a = bounds[axis]
+                hi_a = bounds[3 + axis]
+                da = bounds[3 + (axis + 1) % 3] - bounds[(axis + 1) % 3]
+                db = bounds[3 + (axis + 2) % 3] - bounds[(axis + 2) % 3]
+                cap_ab = da * db
+                sum_ab = da + db
+                n_below = 0
+                n_above = n
+                for i in range(2 * n):
+                    c = ev_c[axis, base + i]
+                    if c & 1:
+                        n_above -= 1
+                    t = float(ev_t[axis, base + i])
+                    if t > lo_a and t < hi_a:
+                        p_below = 2.0 * (cap_ab + (t - lo_a) * sum_ab) * inv_total
+                        p_above = 2.0 * (cap_ab + (hi_a - t) * sum_ab) * inv_total
+                        eb = empty_bonus if (n_above == 0 or n_below == 0) else 0.0
+                        cost = trav_cost + isect_cost * (1.0 - eb) * (p_below * n_below + p_above * n_above)
+                        if cost < best_cost:
+                            best_cost = cost
+                            best_axis = axis
+                            best_off = i
+                    if not (c & 1):
+                        n_below += 1
+                if best_axis != -1:
+                    break
+                axis = (axis + 1) % 3
+            if best_cost > old_cost:
+                bad += 1
+            if (best_cost > 4.0 * old_cost and n < 16) or best_axis == -1 or bad == 3:
+                make_leaf = True
+        if make_leaf:
+            # leaf: its primitives in the order of their START edges along x
+            leaf_ids = _grow_i32(leaf_ids, nrefs + n)
+            off = nrefs
+            for i in range(2 * n):
+                c = ev_c[0, base + i]
+                if not (c & 1):
+                    leaf_ids[nrefs] = c >> 1
+                    nrefs += 1
+            w0[node] = LEAF | (n << 2)
+            w1[node] = off
+            spl[node] = 0.0
+            nleaves += 1
+            if n == 0:
+                nempty += 1
+            s_leaf += area
+            s_tests += area * n
+            if sp == 0:
+                break
+            sp -= 1
+            base = st_base[sp]
+            n = st_n[sp]
+            depth = st_depth[sp]
+            bad = st_bad[sp]
+            parent = st_parent[sp]
+            for k in range(6):
+                bounds[k] = st_bounds[sp, k]
+            continue
+        # interior: classify primitives against the split edge (pbrt: START before -> below,
+        # END after -> above)
+        s_inner += area
+        ba = best_axis
+        tsplit = ev_t[ba, base + best_off]
+        for i in range(2 * n):
+            flag[ev_c[ba, base + i] >> 1] = 0
+        n_lo = 0
+        n_hi = 0
+        for i in range(best_off):
+            c = ev_c[ba, base + i]
+            if not (c & 1):
+                flag[c >> 1] |= 1
+                n_lo += 1
+        for i in range(best_off + 1, 2 * n):
+            c = ev_c[ba, base + i]
+            if c & 1:
+                flag[c >> 1] |= 2
+                n_hi += 1
+        # below child's edges go on top of the work area (it is built next), the above child's
+        # are compacted in place (write index <= read index) and wait on the stack
+        need = base + 2 * n + 2 * n_lo
+        if need > cap:
+            cap2 = max(need, cap * 3 // 2)
+            t2 = np.empty((3, cap2), np.float32)
+            c2 = np.empty((3, cap2), np.int32)
+            t2[:, :base + 2 * n] = ev_t[:, :base + 2 * n]
+            c2[:, :base + 2 * n] = ev_c[:, :base + 2 * n]
+            ev_t = t2
+            ev_c = c2
+            cap = cap2
+        for a in range(3):
+            wl = base + 2 * n
+            wr = base
+            for i in range(base, base + 2 * n):
+                c = ev_c[a, i]
+                t = ev_t[a, i]
+                f = flag[c >> 1]
+                if f & 1:
+                    ev_c[a, wl] = c
+                    ev_t[a, wl] = t
+                    wl += 1
+                if f & 2:
+                    ev_c[a, wr] = c
+                    ev_t[a, wr] = t
+                    wr += 1
+        w0[node] = ba
+        w1[node] = 0
+        spl[node] = tsplit
+        # push the above child
+        st_base[sp] = base
+        st_n[sp] = n_hi
+        st_depth[sp] = depth - 1
+        st_bad[sp] = bad
+        st_parent[sp] = node
+        for k in range(6):
+            st_bounds[sp, k] = bounds[k]
+        st_bounds[sp, ba] = tsplit
+        sp += 1
+        # continue with the below child
+        base = base + 2 * n
+        n = n_lo
+        depth -= 1
+        parent = -1
+        bounds[3 + ba] = tsplit
+    return (w0[:nnodes].copy(), w1[:nnodes].copy(), spl[:nnodes].copy(), leaf_ids[:nrefs].copy(),
+            nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area)
+
+
+# ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def kd_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids,
+           rs, sn, s0, s1):
+    """Trace one ray (pbrt-v2 KdTreeAccel::Intersect / IntersectP). ``rs`` (9) float64 scratch for
+    the ray (origin, direction, inverse direction by axis), ``sn``/``s0``/``s1`` the todo stack.
+    Returns (t, tri_id, setups, steps, tests, nodes)."""
+    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, box[0], box[1], box[2], box[3], box[4], box[5],
+                     tmin, tmax)
+    if t0 > t1:
+        return INF, -1, 0, 0, 0, 0
+    rs[0] = ox
+    rs[1] = oy
+    rs[2] = oz
+    rs[3] = dx
+    rs[4] = dy
+    rs[5] = dz
+    rs[6] = 1.0 / dx
+    rs[7] = 1.0 / dy
+    rs[8] = 1.0 / dz
+    tol = T_EPS * (max(abs(t0), abs(t1)) + diag / math.sqrt(dx * dx + dy * dy + dz * dz))
+    best = float(tmax)
+    best_id = -1
+    nvis = 0
+    leaves = 0
+    tests = 0
+    sp = 0
+    node = 0
+    ntmin = t0
+    ntmax = t1
+    while True:
+        if best < ntmin - tol:  # the closest hit lies before this node
+            break
+        nvis += 1
+        w = nodes[node, 0]
+        axis = w & 3
+        if axis != LEAF:
+            split = float(nodes_f[node, 1])
+            o = rs[axis]
+            d = rs[3 + axis]
+            below = node + 1
+            above = w >> 2
+            if d == 0.0:  # parallel to the plane: the side of the origin (both when on it)
+                if o < split:
+                    node = below
+                elif o > split:
+                    node = above
+                else:
+                    sn[sp] = above
+                    s0[sp] = ntmin
+                    s1[sp] = ntmax
+                    sp += 1
+                    node = below
+                continue
+            tp = (split - o) * rs[6 + axis]
+            if d > 0.0:
+                first = below
+                second = above
+            else:
+                first = above
+                second = below
+            if tp - tol > ntmax:
+                node = first
+            elif tp + tol < ntmin:
+                node = second
+            else:
+                sn[sp] = second
+                s0[sp] = max(ntmin, tp - tol)
+                s1[sp] = ntmax
+                sp += 1
+                node = first
+                ntmax = min(ntmax, tp + tol)
+        else:
+            leaves += 1
+            off = nodes[node, 1]
+            for r in range(off, off + (w >> 2)):
+                tests += 1
+                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2], tv[r, 3],
+                                 tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8], tmin, best)
+                if t < best:
+                    best = t
+                    best_id = ids[r]
+                    if anyhit:
+                        return best, best_id, 1, leaves, tests, nvis
+            if sp == 0:
+                break
+            sp -= 1
+            node = sn[sp]
+            ntmin = s0[sp]
+            ntmax = s1[sp]
+    if best_id < 0:
+        best = INF
+    return best, best_id, 1, leaves, tests, nvis
+
+
+@pjit
+def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+             out_t, out_id, counters):
+    """Batched kd-tree traversal, ``prange`` over chunks of CHUNK rays (one todo stack per chunk).
+    ``counters`` is an (m, 5) int32 array or None (None compiles the variant without counting)."""
+    m = O.shape[0]
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        rs = np.empty(9, np.float64)
+        sn = np.empty(stack_size, np.int64)
+        s0 = np.empty(stack_size, np.float64)
+        s1 = np.empty(stack_size, np.float64)
+        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            t, tid, su, st, te, nv = kd_ray(
+                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
+                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                box, diag, nodes, nodes_f, tv, ids, rs, sn, s0, s1)
+            out_t[i] = t
+            out_id[i] = tid
+            if counters is not None:
+                counters[i, 0] = su
+                counters[i, 1] = st
+                counters[i, 2] = te
+                counters[i, 3] = nv
+
+
+def root_box(scene) -> np.ndarray:
+    """The traversal's root box: the scene bounds joined with the triangles' bounds, padded by
+    1e-5 of the largest extent so rays through boundary vertices meet it despite rounding."""
+    v = scene.tris.reshape(-1, 3).astype(np.float64)
+    lo = np.minimum(v.min(axis=0), scene.bounds[0].astype(np.float64))
+    hi = np.maximum(v.max(axis=0), scene.bounds[1].astype(np.float64))
+    pad = 1e-5 * max(float((hi - lo).max()), 1e-6)
+    return np.concatenate([lo - pad, hi + pad])
+
+
+class KdTree(Accel):
+    """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
+    ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
+    round(8 + 1.3 floor(log2 N)))."""
+
+    name = "kdtree"
+
+    def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
+                 empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None):
+        self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
+        self.max_prims, self.max_depth = max_prims, max_depth
+
+    def build(self, scene):
+        n = scene.n
+        if n >= 2**29:
+            raise GridcostError(f"{n:,} triangles exceed the kd-tree's 29-bit index range")
+        if int(self.max_prims) < 0:
+            raise GridcostError(f"kd-tree max_prims must be >= 0, got {self.max_prims}")
+        depth = pbrt_max_depth(n) if self.max_depth is None else int(self.max_depth)
+        if depth < 0 or depth > 200:
+            raise GridcostError(f"kd-tree max_depth must be in [0, 200], got {depth}")
+        # edges (3 x 2N x 8 B) x ~4 for the work area, plus about 3 refs per triangle
+        check_budget(f"a kd-tree over {n:,} triangles of {scene.name}", n * (3 * 2 * 8 * 4 + 3 * 40 + 16))
+        t_start = time.perf_counter()
+        tris = scene.tris
+        lo = tris.min(axis=1)
+        hi = tris.max(axis=1)
+        ev_t, ev_c = sorted_edges(lo, hi)
+        cap = max(16, 8 * n)
+        wt = np.empty((3, cap), np.float32)
+        wc = np.empty((3, cap), np.int32)
+        wt[:, :2 * n] = ev_t
+        wc[:, :2 * n] = ev_c
+        del ev_t, ev_c
+        rootb = (np.concatenate([lo.min(axis=0), hi.max(axis=0)]).astype(np.float64) if n
+                 else np.zeros(6))
+        (w0, w1, spl, leaf_ids, nleaves, nempty, depth_reached,
+         s_inner, s_leaf, s_tests, root_area) = kd_build(
+            wt, wc, n, rootb, depth, int(self.max_prims), float(self.isect_cost),
+            float(self.trav_cost), float(self.empty_bonus))
+        del wt, wc
+        nodes = np.empty((len(w0), 2), np.int32)
+        nodes[:, 0] = w0
+        inner = (w0 & 3) != LEAF
+        nodes[:, 1] = np.where(inner, spl.view(np.int32), w1)
+        self.nodes_ = nodes
+        self.nodes_f_ = nodes.view(np.float32)
+        self.tri_ids_ = leaf_ids
+        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[leaf_ids])
+        self.box_ = root_box(scene) if n else np.zeros(6)
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
+        self.n_, self.max_depth_, self.depth_ = n, depth, int(depth_reached)
+        self.leaves_, self.empty_leaves_ = int(nleaves), int(nempty)
+        ra = root_area if root_area > 0 else np.nan
+        self.sah_ = {"exp_inner": s_inner / ra, "exp_leaves": s_leaf / ra, "exp_tests": s_tests / ra}
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        m = len(o)
+        out_t = np.empty(m, np.float32)
+        out_id = np.empty(m, np.int32)
+        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        if self.n_ == 0:
+            out_t[:] = np.inf
+            out_id[:] = -1
+            return out_t, out_id, cnt
+        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_, self.nodes_f_,
+                 self.tri_verts_, self.tri_ids_, self.depth_ + 2, out_t, out_id, cnt)
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        nn = len(self.nodes_)
+        refs = len(self.tri_ids_)
+        e = self.sah_
+        return {
+            "structure": "kdtree", "nodes": nn, "interior": nn - self.leaves_, "leaves": self.leaves_,
+            "empty_leaves": self.empty_leaves_, "depth": self.depth_, "max_depth": self.max_depth_,
+            "refs": refs, "refs_per_tri": refs / max(self.n_, 1),
+            "mean_leaf_refs": refs / max(self.leaves_ - self.empty_leaves_, 1),
+            # Havran-style expectations for a ray meeting the root box (surface-area ratios)
+            "exp_inner": e["exp_inner"], "exp_leaves": e["exp_leaves"], "exp_tests": e["exp_tests"],
+            "sah_cost": self.trav_cost * e["exp_inner"] + self.isect_cost * e["exp_tests"],
+            "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
+            "build_s": self.build_seconds_,
+            "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
+                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
+        }
