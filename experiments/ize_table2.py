@@ -16,7 +16,7 @@ import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum
 from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
-from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
+from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, nearest, penalty_pct, sweep
 from tracer.constants import IZE_TI_OVER_TS
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -39,10 +39,6 @@ def add_arguments(p) -> None:
     p.add_argument("--rays", type=int, default=None, help="rays per kind (default 100000; --quick 10000)")
     p.add_argument("--repeats", type=int, default=None, help="timed repeats per point (default 5)")
     p.add_argument("--seed", type=int, default=0)
-
-
-def _penalty(t, best):
-    return 100.0 * (t / best - 1.0)
 
 
 def run(args, log=print) -> dict:
@@ -90,9 +86,8 @@ def run(args, log=print) -> dict:
         for kind in KINDS:
             k = df[(df.scene == name) & (df.ray_kind == kind)]
             best = k.loc[k.ns_per_ray.idxmin()]
-            at = lambda m: k.iloc[int(np.argmin(np.abs(np.log(k.param_cells.values / m))))]  # noqa: E731
-            r8 = at(8.0 * scene.n)
-            rf = at(2.0 * scene.n * ratio)
+            r8 = nearest(k, 8.0 * scene.n)
+            rf = nearest(k, 2.0 * scene.n * ratio)
             g = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
             fits.append({"scene": name, "ray_kind": kind, "tsetup_ns": g.tsetup_, "ts_ns": g.ts_, "ti_ns": g.ti_,
                          "ti_over_ts": g.ti_over_ts_, "ti_over_ts_ci": g.ci_["ti_over_ts"], "r2": g.metrics_["r2"],
@@ -100,8 +95,8 @@ def run(args, log=print) -> dict:
             suffix = "" if kind == "random" else f"_{kind}"
             entry.update({
                 f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.ns_per_ray,
-                f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": _penalty(rf.ns_per_ray, best.ns_per_ray),
-                f"theory_M_8N{suffix}": int(r8.cells), f"penalty_8N_pct{suffix}": _penalty(r8.ns_per_ray, best.ns_per_ray),
+                f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": penalty_pct(rf.ns_per_ray, best.ns_per_ray),
+                f"theory_M_8N{suffix}": int(r8.cells), f"penalty_8N_pct{suffix}": penalty_pct(r8.ns_per_ray, best.ns_per_ray),
             })
         entry.update({"paper_empirical_M": p[3], "paper_theory_M": p[4], "paper_penalty_pct": p[5]})
         table.append(entry)

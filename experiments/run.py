@@ -18,10 +18,11 @@ TARGETS: dict[str, tuple[str, str]] = {
     "bench": ("experiments.bench", "build time and Mrays/s of every structure beside Embree and trimesh"),
     "derive": ("experiments.ize_derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
     "table2": ("experiments.ize_table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
+    "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2"]
+ALL_ORDER = ["derive", "table2", "table3"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:

@@ -64,3 +64,13 @@ def best_row(rows: list[dict]) -> dict:
 
 def as_arrays(rows, *cols):
     return tuple(np.array([r[c] for r in rows], float) for c in cols)
+
+
+def nearest(rows_df, cells: float):
+    """The row of a (one scene, one ray kind) frame measured at the cell count nearest ``cells``."""
+    return rows_df.iloc[int(np.argmin(np.abs(np.log(rows_df.param_cells.values / cells))))]
+
+
+def penalty_pct(t, best) -> float:
+    """Extra time of ``t`` over ``best``, in percent."""
+    return 100.0 * (t / best - 1.0)

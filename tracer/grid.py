@@ -106,16 +106,28 @@ def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
 
 
 # ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def _block_exit(o, d, lo, bsize, b):
+    """t where the ray leaves block ``b`` (of size ``bsize``) along one axis."""
+    if d > 0.0:
+        return (lo + (b + 1) * bsize - o) / d
+    if d < 0.0:
+        return (lo + b * bsize - o) / d
+    return INF
+
+
 @jit
 def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
-             cell_start, tri_ids, tv, mb, chunk):
+             cell_start, tri_ids, tv, mb, chunk, macro, mshift):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
 
-    Returns (t, tri_id, setups, steps, tests, skips). ``mb`` is the (chunks, MAILBOX) mailbox array
-    or None (mailboxing compiled out)."""
+    Returns (t, tri_id, setups, steps, tests, skips, jumps). ``mb`` is the (chunks, MAILBOX) mailbox
+    array or None (mailboxing compiled out). ``macro`` is the macrocell occupancy (blocks of
+    2^mshift cells per axis, uint8, x fastest) or None: entering a cell of an empty block, the ray
+    jumps to the block's exit and the DDA is set up again there."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, tmax)
     if t0 > t1:
-        return INF, -1, 0, 0, 0, 0
+        return INF, -1, 0, 0, 0, 0, 0
     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
         ox, oy, oz, dx, dy, dz, t0, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
         gp[6], gp[7], gp[8], nx, ny, nz)
@@ -127,7 +139,28 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
     steps = 0
     tests = 0
     skips = 0
+    jumps = 0
+    tjump = -INF
+    bnx = ((nx - 1) >> mshift) + 1
+    bny = ((ny - 1) >> mshift) + 1
     while True:
+        if macro is not None:
+            bx = ix >> mshift
+            by = iy >> mshift
+            bz = iz >> mshift
+            if macro[bx + bnx * (by + bny * bz)] == 0:
+                k = float(1 << mshift)
+                te = min(_block_exit(ox, dx, gp[0], gp[3] * k, bx), _block_exit(oy, dy, gp[1], gp[4] * k, by),
+                         _block_exit(oz, dz, gp[2], gp[5] * k, bz))
+                if best <= te or te > t1:
+                    break
+                if te > tjump:  # a jump that makes no progress falls back to ordinary steps
+                    tjump = te
+                    jumps += 1
+                    ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
+                        ox, oy, oz, dx, dy, dz, te, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
+                        gp[6], gp[7], gp[8], nx, ny, nz)
+                    continue
         c = np.uintp(ix + nx * (iy + ny * iz))
         steps += 1
         for r in range(cell_start[c], cell_start[c + np.uintp(1)]):
@@ -147,7 +180,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                 best = t
                 best_id = tid
                 if anyhit:
-                    return best, best_id, 1, steps, tests, skips
+                    return best, best_id, 1, steps, tests, skips, jumps
         # leave the cell through its nearest plane
         if tnx < tny:
             if tnx < tnz:
@@ -181,29 +214,40 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                 tnz += tdz
     if best_id < 0:
         best = INF
-    return best, best_id, 1, steps, tests, skips
+    return best, best_id, 1, steps, tests, skips, jumps
 
 
 @pjit
 def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
-               out_t, out_id, counters, mb):
+               out_t, out_id, counters, mb, macro, mshift):
     """Batched grid traversal, ``prange`` over chunks of CHUNK rays. ``counters`` and ``mb`` are
     arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
     m = O.shape[0]
     nchunks = (m + CHUNK - 1) // CHUNK
     for ch in prange(nchunks):
         for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, st, te, sk = grid_ray(
+            t, tid, su, st, te, sk, ju = grid_ray(
                 float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
                 float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
-                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch)
+                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch, macro, mshift)
             out_t[i] = t
             out_id[i] = tid
             if counters is not None:
                 counters[i, 0] = su
                 counters[i, 1] = st
                 counters[i, 2] = te
+                counters[i, 3] = ju
                 counters[i, 4] = sk
+
+
+def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
+    """uint8 occupancy of k x k x k blocks of cells (x fastest), 1 where any cell holds a triangle."""
+    nx, ny, nz = (int(r) for r in res)
+    occ = (np.diff(cell_start) > 0).reshape(nz, ny, nx)
+    bx, by, bz = -(-nx // k), -(-ny // k), -(-nz // k)
+    pad = np.zeros((bz * k, by * k, bx * k), bool)
+    pad[:nz, :ny, :nx] = occ
+    return np.ascontiguousarray(pad.reshape(bz, k, by, k, bx, k).any(axis=(1, 3, 5)).astype(np.uint8).ravel())
 
 
 class UniformGrid(Accel):
@@ -212,15 +256,19 @@ class UniformGrid(Accel):
     Resolution: ``cells`` (total cell count M, near-cubical cells), or ``rule='pbrt'`` (3 N^(1/3)
     along the longest axis, ``clamp`` at 64), or ``rule='wald'`` (lambda), or an explicit ``res``.
     ``exact`` selects triangle/box overlap (default) vs bounding-box assignment; ``mailbox`` turns
-    on per-ray mailboxing.
+    on per-ray mailboxing; ``macro`` = K > 0 adds an empty-space-skipping layer of K^3-cell blocks
+    (K a power of two; counter "nodes" = macrocell jumps).
     """
 
     name = "grid"
 
     def __init__(self, cells=None, res=None, rule=None, lam=WALD_LAMBDA, clamp=True, exact=True,
-                 mailbox=False, factor=None):
+                 mailbox=False, factor=None, macro=0):
         self.cells, self.res, self.rule, self.lam = cells, res, rule, lam
         self.clamp, self.exact, self.mailbox, self.factor = clamp, exact, mailbox, factor
+        if macro and (int(macro) & (int(macro) - 1)):
+            raise GridcostError(f"macrocell size must be a power of two, got {macro}")
+        self.macro = int(macro or 0)
 
     def _resolution(self, scene) -> np.ndarray:
         if self.res is not None:
@@ -259,6 +307,8 @@ class UniformGrid(Accel):
         self.cell_start_ = cell_start.astype(np.int32)
         self.tri_ids_ = tri_ids
         self.tri_verts_ = np.ascontiguousarray(scene.tris.reshape(-1, 9)[tri_ids])
+        self.mshift_ = int(self.macro).bit_length() - 1 if self.macro else 0
+        self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start
         self.res_, self.gp_, self.n_, self.refs_ = res, gp, scene.n, refs
         self.scene_name_ = scene.name
@@ -272,7 +322,7 @@ class UniformGrid(Accel):
         mb = np.empty(((m + CHUNK - 1) // CHUNK, MAILBOX), np.int32) if self.mailbox else None
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
-                   self.tri_verts_, out_t, out_id, cnt, mb)
+                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
@@ -284,4 +334,5 @@ class UniformGrid(Accel):
             "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
             "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
             "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,
+            "macro": self.macro,
         }

@@ -91,7 +91,7 @@ def _gather_ranges(src: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.
 
 
 # ---------------------------------------------------------------- traversal
-@jit
+@jit(inline="always")
 def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv,
                sti, stf, lvl, ray):
     """Trace one ray through a nested grid: closest hit (or any hit when ``anyhit``).

@@ -1,0 +1,395 @@
+"""Bounding volume hierarchy: binned SAH build (Wald 2007) and ordered stack traversal.
+
+Build (Numba, O(N log N)): top-down over a primitive index array partitioned in place. Per node:
+bounds and centroid bounds of its triangles; ``bins`` (32) equal-width bins of the centroids on
+each of the three axes; the split between bins with the least SAH cost
+``trav_cost + (A_L N_L + A_R N_R) / A`` (pbrt-v2's BVHAccel weights: traversal 1/8, intersection
+1). A node of at most ``max_leaf`` (4) triangles becomes a leaf when that is no dearer than the
+best split (cost N); larger nodes are always split (by index halves when all centroids coincide).
+
+Layout (depth-first, left child implicit at ``i + 1``): ``bounds_`` (nodes, 6) float32
+[lo xyz, hi xyz] and ``info_`` (nodes, 2) int32: interior ``[right child, 0]``, leaf
+``[offset, count >= 1]``; ``tri_ids_`` and ``tri_verts_`` (N, 9) float32 hold the triangles in
+leaf order.
+
+Traversal: at an interior node both child boxes are tested (float64 slab test that treats an
+origin on a slab plane with a zero direction as inside); the nearer hit child is visited first
+and the other pushed with its entry distance on a fixed-size stack (one per chunk of rays), and
+popped entries beyond the closest hit are dropped. Box/hit comparisons are widened by ``tol``
+(1e-7 of the ray's t scale) so rounding never loses a hit. Counters: ``setups`` 1 per ray meeting
+the root box, ``nodes`` nodes visited (entered), ``steps`` leaves visited, ``tests`` triangle tests.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from numba import prange
+
+from tracer._jit import jit, pjit
+from tracer.accel import COUNTER_NAMES, Accel
+from tracer.errors import GridcostError
+from tracer.geometry import INF, ray_box, ray_triangle
+from tracer.kdtree import root_box
+from tracer.memory import check_budget
+
+#: rays per parallel chunk (each chunk owns one stack)
+CHUNK = 64
+#: relative widening of box/hit comparisons (of the ray's t scale)
+T_EPS = 1e-7
+NCOUNT = len(COUNTER_NAMES)
+#: pbrt-v2 BVHAccel SAH weights: traversal 1/8 of a triangle test
+BVH_TRAV_COST = 0.125
+
+
+# ---------------------------------------------------------------- build
+@jit
+def _bin_of(c, cmin, scale, nbins):
+    b = int((c - cmin) * scale)
+    if b < 0:
+        return 0
+    if b >= nbins:
+        return nbins - 1
+    return b
+
+
+@jit
+def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
+    """Binned-SAH BVH over primitive bounds ``pb`` (N, 6) float32 and centroids ``pc`` (N, 3)
+    float64. Returns (bounds (nodes, 6) float32, info (nodes, 2) int32, primitive order, leaves,
+    max depth, SAH sums: interior area, leaf area x count; root area)."""
+    n = pb.shape[0]
+    idx = np.arange(n).astype(np.int32)
+    cap = max(1, 2 * n - 1)
+    nb = np.empty((cap, 6), np.float32)
+    info = np.zeros((cap, 2), np.int32)
+    bin_n = np.zeros((3, nbins), np.int64)
+    bin_b = np.empty((3, nbins, 6), np.float64)
+    r_area = np.empty(nbins, np.float64)
+    r_n = np.empty(nbins, np.int64)
+    ss = 64
+    st_s = np.empty(ss, np.int64)
+    st_e = np.empty(ss, np.int64)
+    st_p = np.empty(ss, np.int64)
+    st_d = np.empty(ss, np.int64)
+    sp = 0
+    s = 0
+    e = n
+    parent = -1
+    depth = 0
+    nnodes = 0
+    nleaves = 0
+    max_depth = 0
+    s_inner = 0.0
+    s_tests = 0.0
+    root_area = 0.0
+    while True:
+        node = nnodes
+        nnodes += 1
+        if parent >= 0:
+            info[parent, 0] = node
+        max_depth = max(max_depth, depth)
+        lo0 = INF; lo1 = INF; lo2 = INF; hi0 = -INF; hi1 = -INF; hi2 = -INF
+        c0 = INF; c1 = INF; c2 = INF; C0 = -INF; C1 = -INF; C2 = -INF
+        for i in range(s, e):
+            p = idx[i]
+            lo0 = min(lo0, pb[p, 0]); lo1 = min(lo1, pb[p, 1]); lo2 = min(lo2, pb[p, 2])
+            hi0 = max(hi0, pb[p, 3]); hi1 = max(hi1, pb[p, 4]); hi2 = max(hi2, pb[p, 5])
+            c0 = min(c0, pc[p, 0]); c1 = min(c1, pc[p, 1]); c2 = min(c2, pc[p, 2])
+            C0 = max(C0, pc[p, 0]); C1 = max(C1, pc[p, 1]); C2 = max(C2, pc[p, 2])
+        nb[node, 0] = lo0; nb[node, 1] = lo1; nb[node, 2] = lo2
+        nb[node, 3] = hi0; nb[node, 4] = hi1; nb[node, 5] = hi2
+        ex0 = hi0 - lo0; ex1 = hi1 - lo1; ex2 = hi2 - lo2
+        area = 2.0 * (ex0 * ex1 + ex1 * ex2 + ex2 * ex0)
+        if node == 0:
+            root_area = area
+        cnt = e - s
+        best_cost = INF
+        best_axis = -1
+        best_bin = -1
+        if cnt > 1:
+            for a in range(3):
+                cmin = c0 if a == 0 else (c1 if a == 1 else c2)
+                cmax = C0 if a == 0 else (C1 if a == 1 else C2)
+                if not cmax > cmin:
+                    continue
+                scale = nbins / (cmax - cmin)
+                for b in range(nbins):
+                    bin_n[a, b] = 0
+                    for k in range(3):
+                        bin_b[a, b, k] = INF
+                        bin_b[a, b, 3 + k] = -INF
+                for i in range(s, e):
+                    p = idx[i]
+                    b = _bin_of(pc[p, a], cmin, scale, nbins)
+                    bin_n[a, b] += 1
+                    for k in range(3):
+                        bin_b[a, b, k] = min(bin_b[a, b, k], pb[p, k])
+                        bin_b[a, b, 3 + k] = max(bin_b[a, b, 3 + k], pb[p, 3 + k])
+                # sweep from the right: area and count of bins b..nbins-1
+                x0 = INF; x1 = INF; x2 = INF; X0 = -INF; X1 = -INF; X2 = -INF
+                acc = 0
+                for b in range(nbins - 1, 0, -1):
+                    x0 = min(x0, bin_b[a, b, 0]); x1 = min(x1, bin_b[a, b, 1]); x2 = min(x2, bin_b[a, b, 2])
+                    X0 = max(X0, bin_b[a, b, 3]); X1 = max(X1, bin_b[a, b, 4]); X2 = max(X2, bin_b[a, b, 5])
+                    acc += bin_n[a, b]
+                    r_n[b] = acc
+                    r_area[b] = 2.0 * ((X0 - x0) * (X1 - x1) + (X1 - x1) * (X2 - x2) + (X2 - x2) * (X0 - x0)) if acc else 0.0
+                x0 = INF; x1 = INF; x2 = INF; X0 = -INF; X1 = -INF; X2 = -INF
+                acc = 0
+                for b in range(nbins - 1):  # split between bin b and b + 1
+                    x0 = min(x0, bin_b[a, b, 0]); x1 = min(x1, bin_b[a, b, 1]); x2 = min(x2, bin_b[a, b, 2])
+                    X0 = max(X0, bin_b[a, b, 3]); X1 = max(X1, bin_b[a, b, 4]); X2 = max(X2, bin_b[a, b, 5])
+                    acc += bin_n[a, b]
+                    if acc == 0 or r_n[b + 1] == 0:
+                        continue
+                    la = 2.0 * ((X0 - x0) * (X1 - x1) + (X1 - x1) * (X2 - x2) + (X2 - x2) * (X0 - x0))
+                    cost = la * acc + r_area[b + 1] * r_n[b + 1]
+                    if cost < best_cost:
+                        best_cost = cost
+                        best_axis = a
+                        best_bin = b
+        split_cost = trav_cost + best_cost / area if area > 0 else (trav_cost + cnt if best_axis >= 0 else INF)
+        if cnt == 1 or (cnt <= max_leaf and (best_axis < 0 or cnt <= split_cost)):
+            info[node, 0] = s
+            info[node, 1] = cnt
+            nleaves += 1
+            s_tests += area * cnt
+            if sp == 0:
+                break
+            sp -= 1
+            s = st_s[sp]; e = st_e[sp]; parent = st_p[sp]; depth = st_d[sp]
+            continue
+        s_inner += area
+        mid = (s + e) // 2
+        if best_axis >= 0:
+            a = best_axis
+            cmin = c0 if a == 0 else (c1 if a == 1 else c2)
+            cmax = C0 if a == 0 else (C1 if a == 1 else C2)
+            scale = nbins / (cmax - cmin)
+            i = s
+            j = e - 1
+            while i <= j:
+                if _bin_of(pc[idx[i], a], cmin, scale, nbins) <= best_bin:
+                    i += 1
+                else:
+                    tmp = idx[i]
+                    idx[i] = idx[j]
+                    idx[j] = tmp
+                    j -= 1
+            if i > s and i < e:
+                mid = i
+        info[node, 1] = 0
+        if sp == st_s.shape[0]:
+            st_s = np.concatenate((st_s, st_s))
+            st_e = np.concatenate((st_e, st_e))
+            st_p = np.concatenate((st_p, st_p))
+            st_d = np.concatenate((st_d, st_d))
+        st_s[sp] = mid; st_e[sp] = e; st_p[sp] = node; st_d[sp] = depth + 1
+        sp += 1
+        e = mid
+        parent = -1
+        depth += 1
+    return nb[:nnodes].copy(), info[:nnodes].copy(), idx, nleaves, max_depth, s_inner, s_tests, root_area
+
+
+# ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def _box(B, k, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim):
+    """Slab test of node k's box (``s*`` = 0 or 3: which face is near on each axis). NaN products
+    (origin on a slab plane, zero direction) are ignored, i.e. count as inside."""
+    tn = tmin
+    tf = tlim
+    a = (float(B[k, sx]) - ox) * ix
+    if a > tn:
+        tn = a
+    a = (float(B[k, 3 - sx]) - ox) * ix
+    if a < tf:
+        tf = a
+    a = (float(B[k, 1 + sy]) - oy) * iy
+    if a > tn:
+        tn = a
+    a = (float(B[k, 4 - sy]) - oy) * iy
+    if a < tf:
+        tf = a
+    a = (float(B[k, 2 + sz]) - oz) * iz
+    if a > tn:
+        tn = a
+    a = (float(B[k, 5 - sz]) - oz) * iz
+    if a < tf:
+        tf = a
+    return tn, tf
+
+
+@jit(inline="always")
+def bvh_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, box, diag, B, info, tv, ids, sn, st):
+    """Trace one ray; returns (t, tri_id, setups, steps, tests, nodes). ``box`` is the padded
+    root box (robust miss test, finite t-range for ``tol``)."""
+    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, box[0], box[1], box[2], box[3], box[4], box[5],
+                     tmin, tmax)
+    if t0 > t1:
+        return INF, -1, 0, 0, 0, 0
+    ix = 1.0 / dx
+    iy = 1.0 / dy
+    iz = 1.0 / dz
+    sx = 0 if ix >= 0.0 else 3
+    sy = 0 if iy >= 0.0 else 3
+    sz = 0 if iz >= 0.0 else 3
+    best = float(tmax)
+    tol = T_EPS * (max(abs(t0), abs(t1)) + diag / math.sqrt(dx * dx + dy * dy + dz * dz))
+    best_id = -1
+    nvis = 0
+    leaves = 0
+    tests = 0
+    sp = 0
+    node = 0
+    while True:
+        nvis += 1
+        cnt = info[node, 1]
+        if cnt > 0:
+            leaves += 1
+            off = info[node, 0]
+            for r in range(off, off + cnt):
+                tests += 1
+                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2], tv[r, 3],
+                                 tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8], tmin, best)
+                if t < best:
+                    best = t
+                    best_id = ids[r]
+                    if anyhit:
+                        return best, best_id, 1, leaves, tests, nvis
+            node = -1
+        else:
+            left = node + 1
+            right = info[node, 0]
+            ln, lf = _box(B, left, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best)
+            rn, rf = _box(B, right, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best)
+            hl = ln <= lf + tol
+            hr = rn <= rf + tol
+            if hl and hr:
+                if ln <= rn:
+                    sn[sp] = right
+                    st[sp] = rn
+                    node = left
+                else:
+                    sn[sp] = left
+                    st[sp] = ln
+                    node = right
+                sp += 1
+            elif hl:
+                node = left
+            elif hr:
+                node = right
+            else:
+                node = -1
+        if node < 0:
+            while sp > 0:
+                sp -= 1
+                if st[sp] <= best + tol:
+                    node = sn[sp]
+                    break
+            if node < 0:
+                break
+    if best_id < 0:
+        best = INF
+    return best, best_id, 1, leaves, tests, nvis
+
+
+@pjit
+def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, B, info, tv, ids, stack_size, out_t, out_id, counters):
+    """Batched BVH traversal, ``prange`` over chunks of CHUNK rays (one stack per chunk);
+    ``counters`` (m, 5) int32 or None (the variant without counting)."""
+    m = O.shape[0]
+    nchunks = (m + CHUNK - 1) // CHUNK
+    for ch in prange(nchunks):
+        sn = np.empty(stack_size, np.int64)
+        st = np.empty(stack_size, np.float64)
+        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            t, tid, su, stp, te, nv = bvh_ray(
+                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
+                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                box, diag, B, info, tv, ids, sn, st)
+            out_t[i] = t
+            out_id[i] = tid
+            if counters is not None:
+                counters[i, 0] = su
+                counters[i, 1] = stp
+                counters[i, 2] = te
+                counters[i, 3] = nv
+
+
+class BVH(Accel):
+    """Binned-SAH BVH. Parameters: ``bins`` (32), ``max_leaf`` triangles per leaf (4),
+    ``trav_cost`` relative to one triangle test (pbrt-v2: 1/8)."""
+
+    name = "bvh"
+
+    def __init__(self, bins=32, max_leaf=4, trav_cost=BVH_TRAV_COST):
+        self.bins, self.max_leaf, self.trav_cost = bins, max_leaf, trav_cost
+
+    def build(self, scene):
+        n = scene.n
+        if not 2 <= int(self.bins) <= 1024:
+            raise GridcostError(f"BVH bins must be in [2, 1024], got {self.bins}")
+        if int(self.max_leaf) < 1:
+            raise GridcostError(f"BVH max_leaf must be >= 1, got {self.max_leaf}")
+        if n >= 2**30:
+            raise GridcostError(f"{n:,} triangles exceed the BVH's int32 index range")
+        check_budget(f"a BVH over {n:,} triangles of {scene.name}", n * (2 * 32 + 24 + 24 + 40 + 8))
+        t_start = time.perf_counter()
+        tris = scene.tris
+        self.n_ = n
+        if n == 0:
+            self.bounds_ = np.array([[np.inf] * 3 + [-np.inf] * 3], np.float32)
+            self.info_ = np.zeros((1, 2), np.int32)
+            self.tri_ids_ = np.zeros(0, np.int32)
+            self.tri_verts_ = np.zeros((0, 9), np.float32)
+            self.leaves_, self.depth_, self.sah_ = 0, 0, {"exp_inner": 0.0, "exp_tests": 0.0}
+            self.diag_, self.build_seconds_ = 0.0, time.perf_counter() - t_start
+            return self
+        pb = np.concatenate([tris.min(axis=1), tris.max(axis=1)], axis=1)
+        pc = 0.5 * (pb[:, :3].astype(np.float64) + pb[:, 3:].astype(np.float64))
+        B, info, order, nleaves, depth, s_inner, s_tests, root_area = bvh_build(
+            pb, pc, int(self.bins), int(self.max_leaf), float(self.trav_cost))
+        self.bounds_ = B
+        self.info_ = info
+        self.tri_ids_ = order
+        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[order])
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.box_ = root_box(scene)
+        self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
+        self.leaves_, self.depth_ = int(nleaves), int(depth)
+        ra = root_area if root_area > 0 else np.nan
+        self.sah_ = {"exp_inner": s_inner / ra, "exp_tests": s_tests / ra}
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        m = len(o)
+        out_t = np.empty(m, np.float32)
+        out_id = np.empty(m, np.int32)
+        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        if self.n_ == 0:
+            out_t[:] = np.inf
+            out_id[:] = -1
+            return out_t, out_id, cnt
+        bvh_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.bounds_, self.info_, self.tri_verts_,
+                  self.tri_ids_, self.depth_ + 2, out_t, out_id, cnt)
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        nn = len(self.info_)
+        e = self.sah_
+        return {
+            "structure": "bvh", "nodes": nn, "interior": nn - self.leaves_, "leaves": self.leaves_,
+            "depth": self.depth_, "refs": len(self.tri_ids_),
+            "mean_leaf_refs": len(self.tri_ids_) / max(self.leaves_, 1),
+            # expected interior nodes / triangle tests per ray meeting the root box (area ratios)
+            "exp_inner": e["exp_inner"], "exp_tests": e["exp_tests"],
+            "sah_cost": self.trav_cost * e["exp_inner"] + e["exp_tests"],
+            "memory_bytes": int(self.bounds_.nbytes + self.info_.nbytes + self.tri_ids_.nbytes
+                                + self.tri_verts_.nbytes),
+            "build_s": self.build_seconds_,
+            "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost},
+        }
