@@ -20,11 +20,12 @@ from costmodel.derive import long_skinny_time, one_level_time
 N_BOOT = 400
 
 
-def _design_one_level(M, N, form):
+def _design_one_level(M, N, form, setup=True):
     m = np.cbrt(np.asarray(M, float))
     N = np.broadcast_to(np.asarray(N, float), m.shape)
     term = N / m**2 if form == "compact" else N / m
-    return np.column_stack([np.ones_like(m), m, term])
+    cols = [np.ones_like(m), m, term] if setup else [np.zeros_like(m), m, term]
+    return np.column_stack(cols)
 
 
 def _metrics(y, yhat) -> dict:
@@ -36,6 +37,9 @@ def _metrics(y, yhat) -> dict:
 
 
 def _ci(samples, level=0.95):
+    samples = np.asarray(samples, float)
+    if samples.size == 0 or np.isnan(samples).all():
+        return np.nan, np.nan
     lo, hi = np.nanpercentile(samples, [50 * (1 - level), 50 * (1 + level)], axis=0)
     return lo, hi
 
@@ -44,19 +48,27 @@ class GridCostFit:
     """Fit Tsetup, Ts, Ti of Eq 1 (``form='compact'``) or Eq 5 (``form='skinny'``) to (M, T) of one
     scene with N primitives. T is any time unit (we use ns per ray)."""
 
-    def __init__(self, form: str = "compact", n_boot: int = N_BOOT, seed: int = 0):
-        self.form, self.n_boot, self.seed = form, n_boot, seed
+    def __init__(self, form: str = "compact", setup: bool = True, n_boot: int = N_BOOT, seed: int = 0):
+        self.form, self.setup, self.n_boot, self.seed = form, setup, n_boot, seed
+
+    @property
+    def n_constants(self) -> int:
+        return 3 if self.setup else 2
 
     def fit(self, M, T, N):
         M, T = np.asarray(M, float), np.asarray(T, float)
-        X = _design_one_level(M, N, self.form)
+        X = _design_one_level(M, N, self.form, self.setup)
         # relative least squares: weight rows by 1/T so every point of the log-spaced sweep counts
         w = 1.0 / T
         coef, _ = nnls(X * w[:, None], T * w)
         self.N_ = float(N)
         self.coef_ = coef
         self.tsetup_, self.ts_, self.ti_ = (float(c) for c in coef)
-        self.cond_ = float(np.linalg.cond(X * w[:, None] / np.linalg.norm(X * w[:, None], axis=0)))
+        Xw = (X * w[:, None])[:, 0 if self.setup else 1:]
+        self.cond_ = float(np.linalg.cond(Xw / np.linalg.norm(Xw, axis=0)))
+        resid = (T - X @ coef) / T
+        self.rss_ = float((resid**2).sum())
+        self.aic_ = len(T) * np.log(max(self.rss_, 1e-300) / len(T)) + 2 * self.n_constants
         self.metrics_ = _metrics(T, X @ coef)
         rng = np.random.default_rng(self.seed)
         boots = []
@@ -189,3 +201,39 @@ def refine_minimum(M, T) -> float:
     res = minimize_scalar(lambda z: a * z * z + b * z + c, bounds=(x[max(0, i - lo - 1)], x[min(hi - lo - 1, i - lo + 1)]),
                           method="bounded")
     return float(np.exp(res.x))
+
+
+#: candidate one-level models for selection: (form, with Tsetup)
+CANDIDATES = {"eq1": ("compact", True), "eq1-no-setup": ("compact", False),
+              "eq5": ("skinny", True), "eq5-no-setup": ("skinny", False)}
+
+
+def cv_mape(form, setup, M, T, N, k: int = 5, seed: int = 0) -> float:
+    """k-fold cross-validated MAPE (%) of a one-level model on one sweep."""
+    M, T = np.asarray(M, float), np.asarray(T, float)
+    idx = np.random.default_rng(seed).permutation(len(T))
+    errs = []
+    for fold in np.array_split(idx, min(k, len(T))):
+        train = np.setdiff1d(idx, fold)
+        if len(train) < 3:
+            continue
+        g = GridCostFit(form, setup, n_boot=0).fit(M[train], T[train], N)
+        errs.append(np.abs(g.predict(M[fold]) - T[fold]) / T[fold])
+    return float(np.mean(np.concatenate(errs))) * 100 if errs else float("nan")
+
+
+def select_model(M, T, N, candidates=CANDIDATES, tolerance_pct: float = 1.0) -> dict:
+    """Fit every candidate, score by 5-fold CV MAPE and AIC, and choose the simplest (fewest
+    constants, then lowest AIC) whose CV error is within ``tolerance_pct`` points of the best."""
+    rows = []
+    for name, (form, setup) in candidates.items():
+        g = GridCostFit(form, setup, n_boot=0).fit(M, T, N)
+        rows.append({"model": name, "form": form, "constants": g.n_constants, "aic": g.aic_,
+                     "mape_pct": g.metrics_["mape"], "cv_mape_pct": cv_mape(form, setup, M, T, N),
+                     "r2": g.metrics_["r2"], "m_pred": g.optimum()})
+    best = min(r["cv_mape_pct"] for r in rows)
+    ok = [r for r in rows if r["cv_mape_pct"] <= best + tolerance_pct]
+    chosen = min(ok, key=lambda r: (r["constants"], r["aic"]))
+    why = (f"{chosen['model']}: CV MAPE {chosen['cv_mape_pct']:.1f} % within {tolerance_pct} points of the best "
+           f"({best:.1f} %) with the fewest constants ({chosen['constants']})")
+    return {"chosen": chosen["model"], "why": why, "candidates": rows}

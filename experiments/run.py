@@ -18,6 +18,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "bench": ("experiments.bench", "build time and Mrays/s of every structure beside Embree and trimesh"),
     "derive": ("experiments.ize_derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
     "table2": ("experiments.ize_table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
+    "fit": ("experiments.ize_fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
     "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
 }
 

@@ -37,7 +37,7 @@ from tracer.memory import check_budget
 #: rays per parallel chunk (each chunk owns one stack)
 CHUNK = 64
 #: relative widening of box/hit comparisons (of the ray's t scale)
-T_EPS = 1e-7
+T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 #: pbrt-v2 BVHAccel SAH weights: traversal 1/8 of a triangle test
 BVH_TRAV_COST = 0.125

@@ -51,7 +51,7 @@ from tracer.memory import check_budget
 #: rays per parallel chunk (each chunk owns one todo stack)
 CHUNK = 64
 #: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons
-T_EPS = 1e-7
+T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 LEAF = 3
 

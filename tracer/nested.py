@@ -96,14 +96,13 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                sti, stf, lvl, ray):
     """Trace one ray through a nested grid: closest hit (or any hit when ``anyhit``).
 
-    ``sti``/``stf`` are the (levels, 7) int/float stacks of suspended DDA states; ``lvl`` is the
+    ``sti``/``stf`` are the (levels, 10) int and (levels, 7) float stacks of suspended DDA states; ``lvl`` is the
     (m, levels, 3) per-level counter array or None (compiled out). Returns
     (t, tri_id, setups, steps, tests, nodes)."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, GF[0, 0], GF[0, 1], GF[0, 2], GF[0, 9], GF[0, 10],
                      GF[0, 11], tmin, tmax)
     if t0 > t1:
         return INF, -1, 0, 0, 0, 0
-    g = 0
     depth = 0
     nx = GI[0, 0]; ny = GI[0, 1]; nz = GI[0, 2]; off = GI[0, 3]
     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
@@ -129,8 +128,9 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
         if a < 0:
             # descend: suspend this DDA, run the same loop in the child over this cell's interval
             texit = min(tnx, tny, tnz, tend)
-            sti[depth, 0] = g; sti[depth, 1] = ix; sti[depth, 2] = iy; sti[depth, 3] = iz
+            sti[depth, 0] = off; sti[depth, 1] = ix; sti[depth, 2] = iy; sti[depth, 3] = iz
             sti[depth, 4] = sx; sti[depth, 5] = sy; sti[depth, 6] = sz
+            sti[depth, 7] = nx; sti[depth, 8] = ny; sti[depth, 9] = nz
             stf[depth, 0] = tnx; stf[depth, 1] = tny; stf[depth, 2] = tnz
             stf[depth, 3] = tdx; stf[depth, 4] = tdy; stf[depth, 5] = tdz; stf[depth, 6] = tend
             depth += 1
@@ -204,11 +204,11 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                 done = True
                 break
             depth -= 1
-            g = sti[depth, 0]; ix = sti[depth, 1]; iy = sti[depth, 2]; iz = sti[depth, 3]
+            off = sti[depth, 0]; ix = sti[depth, 1]; iy = sti[depth, 2]; iz = sti[depth, 3]
             sx = sti[depth, 4]; sy = sti[depth, 5]; sz = sti[depth, 6]
+            nx = sti[depth, 7]; ny = sti[depth, 8]; nz = sti[depth, 9]
             tnx = stf[depth, 0]; tny = stf[depth, 1]; tnz = stf[depth, 2]
             tdx = stf[depth, 3]; tdy = stf[depth, 4]; tdz = stf[depth, 5]; tend = stf[depth, 6]
-            nx = GI[g, 0]; ny = GI[g, 1]; nz = GI[g, 2]; off = GI[g, 3]
         if done:
             break
     if best_id < 0:
@@ -224,7 +224,7 @@ def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
     m = O.shape[0]
     nchunks = (m + CHUNK - 1) // CHUNK
     for ch in prange(nchunks):
-        sti = np.empty((levels, 7), np.int64)
+        sti = np.empty((levels, 10), np.int64)
         stf = np.empty((levels, 7), np.float64)
         for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
             t, tid, su, st, te, no = nested_ray(

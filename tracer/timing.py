@@ -21,15 +21,26 @@ class Timing(NamedTuple):
         return (self.max - self.min) / self.median if self.median > 0 else 0.0
 
 
-def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> Timing:
-    """Call ``fn`` ``warmup`` times untimed (JIT compilation, caches), then ``repeats`` times."""
+#: a timed sample shorter than this is made of several back-to-back calls (like timeit's autorange)
+MIN_SAMPLE_SECONDS = 0.02
+
+
+def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
+              min_sample: float = MIN_SAMPLE_SECONDS) -> Timing:
+    """Call ``fn`` ``warmup`` times untimed (JIT compilation, caches), then take ``repeats`` samples;
+    a sample runs ``fn`` back to back until it lasts ``min_sample`` seconds and is reported per call."""
     for _ in range(warmup):
         fn()
+    t0 = time.perf_counter()
+    fn()
+    once = time.perf_counter() - t0
+    number = max(1, int(np.ceil(min_sample / max(once, 1e-9)))) if once < min_sample else 1
     runs = []
     for _ in range(max(1, repeats)):
         t0 = time.perf_counter()
-        fn()
-        runs.append(time.perf_counter() - t0)
+        for _ in range(number):
+            fn()
+        runs.append((time.perf_counter() - t0) / number)
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
 

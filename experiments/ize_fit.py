@@ -1,0 +1,90 @@
+"""``fit``: sweep one scene's one-level grid resolution, fit the Ize constants two ways (runtime
+against m, Eq 1/Eq 5; runtime against the tracer's counters), print them with bootstrap CIs, R²,
+MAPE, the chosen model (cross-validation + AIC), and the predicted optimum M measured against the
+swept best."""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum, select_model
+from experiments.common import add_scene_args, scene_from_args
+from experiments.results import PointStore, write_csv, write_json, write_meta
+from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, penalty_pct, sweep
+from tracer.rays import make_rays
+from tracer.timing import set_threads
+
+
+def add_arguments(p) -> None:
+    add_scene_args(p)
+    p.add_argument("--rays", type=int, default=None, help="random rays per point (default 100000; --quick 10000)")
+    p.add_argument("--repeats", type=int, default=None)
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _ci(c):
+    return f"[{c[0]:.3g}, {c[1]:.3g}]"
+
+
+def main(args) -> int:
+    started = time.time()
+    threads = set_threads(args.threads or 1)
+    scene = scene_from_args(args)
+    n_rays = args.rays or (10_000 if args.quick else 100_000)
+    repeats = args.repeats or (3 if args.quick else 5)
+    factors = QUICK_FACTORS if args.quick else FULL_FACTORS
+    rays = {"random": make_rays(scene, "random", n_rays, seed=args.seed)}
+    store = PointStore(args.out, force=args.force)
+    rows = sweep(scene, "grid", grid_cells(scene, factors), rays, store, repeats, desc=f"fit {scene.name}")
+    df = pd.DataFrame(rows)
+    sel = select_model(df.cells.values, df.ns_per_ray.values, scene.n)
+    form, setup = {"eq1": ("compact", True), "eq1-no-setup": ("compact", False),
+                   "eq5": ("skinny", True), "eq5-no-setup": ("skinny", False)}[sel["chosen"]]
+    g = GridCostFit(form, setup).fit(df.cells, df.ns_per_ray, scene.n)
+    c = CounterCostFit().fit([scene.name] * len(df), df.steps, df.tests, df.ns_per_ray)
+    m_best = refine_minimum(df.cells, df.ns_per_ray)
+    m_pred = g.optimum()
+    extra = pd.DataFrame(sweep(scene, "grid", [{"cells": float(round(m_best))}, {"cells": float(round(m_pred))}],
+                               rays, store, repeats, desc="fit check"))
+    allrows = pd.concat([df, extra], ignore_index=True)
+    t_best = allrows.ns_per_ray.min()
+    t_pred = float(extra[extra.param_cells == float(round(m_pred))].ns_per_ray.iloc[0])
+    out = {
+        "scene": scene.name, "N": scene.n, "model": sel["chosen"], "why": sel["why"],
+        "tsetup": g.tsetup_, "ts": g.ts_, "ti": g.ti_, "ti_over_ts": g.ti_over_ts_,
+        "ci": g.ci_, "known": {k: g.known(k) for k in ("tsetup", "ts", "ti")},
+        "r2": g.metrics_["r2"], "mape": g.metrics_["mape"], "cond": g.cond_,
+        "counter_fit": {"tsetup": c.tsetup_[scene.name], "ts": c.ts_, "ti": c.ti_, "ti_over_ts": c.ti_over_ts_,
+                        "ci": c.ci_, "r2": c.metrics_["r2"], "mape": c.metrics_["mape"], "cond": c.cond_},
+        "m_pred": m_pred, "m_best": float(allrows.loc[allrows.ns_per_ray.idxmin()].cells),
+        "penalty": penalty_pct(t_pred, t_best), "candidates": sel["candidates"],
+        "rays": n_rays, "threads": threads, "units": "ns per ray",
+    }
+    out_dir = Path(args.out) / "fit"
+    write_csv(out_dir / f"{scene.name}.csv", allrows)
+    write_json(out_dir / f"{scene.name}.json", out)
+    write_meta(out_dir, "fit", started, scene=scene.name, rays=n_rays, repeats=repeats, threads=threads)
+    if args.json:
+        json.dump(out, sys.stdout, default=float)
+        print()
+        return 0
+    print(f"{scene.name}: N = {scene.n:,}, {len(df)} sweep points, {n_rays:,} random rays, {threads} thread(s)")
+    print(f"model chosen: {sel['why']}")
+    for r in sel["candidates"]:
+        print(f"  {r['model']:14s} constants {r['constants']}  CV MAPE {r['cv_mape_pct']:5.1f} %  AIC {r['aic']:8.1f}  R² {r['r2']:.3f}")
+    for name in ("tsetup", "ts", "ti"):
+        val = getattr(g, f"{name}_")
+        flag = "" if g.known(name) else "   (CI spans zero: not a known number)"
+        print(f"  {name:7s} = {val:8.3f} ns  95 % CI {_ci(g.ci_[name])}{flag}")
+    print(f"  Ti/Ts   = {g.ti_over_ts_:8.3f}     95 % CI {_ci(g.ci_['ti_over_ts'])}   (paper: 4)   "
+          f"condition number {g.cond_:.1f}, R² {g.metrics_['r2']:.3f}, MAPE {g.metrics_['mape']:.1f} %")
+    print(f"  counters: Ts = {c.ts_:.2f} ns/step, Ti = {c.ti_:.2f} ns/test, Ti/Ts = {c.ti_over_ts_:.2f} "
+          f"CI {_ci(c.ci_['ti_over_ts'])}, R² {c.metrics_['r2']:.3f}")
+    print(f"  predicted optimum M = {m_pred:,.0f} ({m_pred / scene.n:.1f}N), best swept M = {out['m_best']:,.0f} "
+          f"({out['m_best'] / scene.n:.1f}N), penalty {out['penalty']:.1f} %")
+    return 0
