@@ -77,7 +77,7 @@ def main(args) -> int:
     print(f"model chosen: {sel['why']}")
     for r in sel["candidates"]:
         print(f"  {r['model']:14s} constants {r['constants']}  CV MAPE {r['cv_mape_pct']:5.1f} %  AIC {r['aic']:8.1f}  R² {r['r2']:.3f}")
-    for name in ("tsetup", "ts", "ti"):
+    for name in ("tsetup", "ts", "ti") if g.setup else ("ts", "ti"):
         val = getattr(g, f"{name}_")
         flag = "" if g.known(name) else "   (CI spans zero: not a known number)"
         print(f"  {name:7s} = {val:8.3f} ns  95 % CI {_ci(g.ci_[name])}{flag}")

@@ -19,11 +19,13 @@ TARGETS: dict[str, tuple[str, str]] = {
     "derive": ("experiments.ize_derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
     "table2": ("experiments.ize_table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
     "fit": ("experiments.ize_fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
+    "fig2": ("experiments.ize_fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
+    "exponents": ("experiments.ize_exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
     "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2", "table3"]
+ALL_ORDER = ["derive", "table2", "table3", "fig2", "exponents"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
