@@ -98,15 +98,17 @@ class PointStore:
     def __init__(self, directory, force: bool = False):
         self.dir = Path(directory) / "points"
         self.force = force
+        self._fresh: set[str] = set()  # points measured by this run (visible even with --force)
 
     @staticmethod
     def key(params: dict) -> str:
         return hashlib.sha1(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
-    def get(self, params: dict):
-        if self.force:
+    def get(self, params: dict, ignore_force: bool = False):
+        key = self.key(params)
+        if self.force and not ignore_force and key not in self._fresh:
             return None
-        p = self.dir / f"{self.key(params)}.json"
+        p = self.dir / f"{key}.json"
         if p.exists():
             try:
                 return json.loads(p.read_text())
@@ -115,7 +117,9 @@ class PointStore:
         return None
 
     def put(self, params: dict, row: dict) -> dict:
-        write_json(self.dir / f"{self.key(params)}.json", row)
+        key = self.key(params)
+        write_json(self.dir / f"{key}.json", row)
+        self._fresh.add(key)
         return row
 
     def measure(self, params: dict, fn) -> tuple[dict, bool]:
@@ -124,3 +128,21 @@ class PointStore:
         if row is not None:
             return row, True
         return self.put(params, fn()), False
+
+
+def write_index(out_dir="results") -> Path:
+    """results/README.md: a link to every target's summary, data and figure present on disk."""
+    out_dir = Path(out_dir)
+    figs = REPO / "paper_figs"
+    lines = ["# Results", "", "Output of the last run of each target (`python -m experiments.run <target>`). "
+             "Each folder holds tidy CSV (one row per measurement), `summary.md` (ours beside the paper) and "
+             "`meta.json` (commit, versions, CPU, threads, seeds, wall time).", "",
+             "| target | summary | data | figure |", "|---|---|---|---|"]
+    for d in sorted(p for p in out_dir.iterdir() if p.is_dir() and p.name != "points"):
+        summ = d / "summary.md"
+        csvs = sorted(d.glob("*.csv")) + sorted(d.glob("*.json"))
+        fig = [f for f in (figs / f"{d.name}.png", figs / f"{d.name}.pdf") if f.exists()]
+        lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
+                     + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs[:6]) or "–") + " | "
+                     + (", ".join(f"[{f.suffix[1:]}](../paper_figs/{f.name})" for f in fig) or "–") + " |")
+    return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")

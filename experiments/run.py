@@ -36,6 +36,8 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="results", help="results directory (default: results)")
     p.add_argument("--quick", action="store_true", help="fewer rays and sweep points (CI, first contact)")
     p.add_argument("--force", action="store_true", help="redo sweep points already stored")
+    p.add_argument("--dask", default=None, metavar="ADDRESS",
+                   help="send sweep points to a Dask scheduler (tcp://host:8786, or 'local' for a LocalCluster)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,6 +57,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _index(out) -> None:
+    from pathlib import Path
+
+    from experiments.results import write_index
+    if Path(out).is_dir():
+        write_index(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     from tracer.errors import GridcostError
 
@@ -65,6 +75,9 @@ def main(argv: list[str] | None = None) -> int:
         import numba
         numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
     try:
+        if args.dask:
+            from experiments.executor import set_executor
+            set_executor(args.dask)
         if args.target == "all":
             rc = 0
             for name in ALL_ORDER:
@@ -73,8 +86,12 @@ def main(argv: list[str] | None = None) -> int:
                                                      + (["--force"] if args.force else [])
                                                      + ["--out", args.out])
                 rc = max(rc, mod.main(sub_args))
+            _index(args.out)
             return rc
-        return importlib.import_module(TARGETS[args.target][0]).main(args)
+        rc = importlib.import_module(TARGETS[args.target][0]).main(args)
+        if args.target not in ("verify",):
+            _index(args.out)
+        return rc
     except GridcostError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -41,17 +41,29 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
 
 def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, store: PointStore,
           repeats: int = 5, desc: str | None = None, extra_key: dict | None = None) -> list[dict]:
-    """Measure every parameter set (skipping stored ones), with a tqdm bar; returns all rows."""
-    rows = []
-    bar = tqdm(param_list, desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
-               disable=None, dynamic_ncols=True)
-    for params in bar:
-        key = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
-               "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
-               **(extra_key or {})}
-        got, _ = store.measure(key, lambda: {"rows": measure(scene, structure, params, rays_by_kind, repeats)})
-        rows.extend(got["rows"])
-    return rows
+    """Measure every parameter set not stored yet through the current executor (local or Dask),
+    storing each point as soon as it is measured; returns the rows of all points in order."""
+    from experiments.executor import get_executor, remember_scene
+    remember_scene(scene)
+    specs, keys = [], []
+    for params in param_list:
+        spec = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
+                "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
+                **(extra_key or {})}
+        keys.append(spec)
+        if store.get(spec) is None:
+            specs.append(spec)
+    if specs:
+        bar = tqdm(total=len(specs), desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
+                   disable=None, dynamic_ncols=True)
+        for spec, rows in get_executor().map(specs):
+            store.put(spec, {"rows": rows})
+            bar.update(1)
+        bar.close()
+    out = []
+    for spec in keys:
+        out.extend(store.get(spec, ignore_force=True)["rows"])
+    return out
 
 
 def grid_cells(scene, factors) -> list[dict]:

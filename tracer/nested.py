@@ -30,7 +30,7 @@ import numpy as np
 from numba import prange
 
 from tracer._jit import jit, pjit
-from tracer.accel import COUNTER_NAMES, Accel
+from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_setup, ray_box, ray_triangle
@@ -425,7 +425,6 @@ class NestedGrid(Accel):
         """Per-level work of closest-hit tracing: ``setups``, ``steps``, ``tests`` as (m, levels)
         int32 arrays (column l-1 = level l; ``setups`` at level >= 2 = sub-grids entered there),
         ``mean`` {"setups": [per level], ...} and ``hit`` (m,) bool."""
-        from tracer.accel import as_rays, tmax_array
         o, d = as_rays(origins, directions)
         _, ids, _, lvl = self._run(o, d, float(tmin), tmax_array(tmax, len(o)), False, True)
         out = {k: np.ascontiguousarray(lvl[:, :, j]) for j, k in enumerate(LEVEL_COUNTERS)}
