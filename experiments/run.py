@@ -19,13 +19,15 @@ TARGETS: dict[str, tuple[str, str]] = {
     "derive": ("experiments.ize_derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
     "table2": ("experiments.ize_table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
     "fit": ("experiments.ize_fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
+    "table4": ("experiments.ize_table4", "Ize Table 4: two-level grids, M1 = (8N)^0.6, M2 = 8N2 vs swept M1"),
     "fig2": ("experiments.ize_fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
+    "fig5": ("experiments.ize_fig5", "Ize Fig 5: two-level (m1, m2) factor plane, % over best, theory point"),
     "exponents": ("experiments.ize_exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
     "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2", "table3", "fig2", "exponents"]
+ALL_ORDER = ["derive", "table2", "table3", "table4", "fig2", "fig5", "exponents"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:

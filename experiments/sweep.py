@@ -28,7 +28,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
         rows.append({
             "scene": scene.name, "N": scene.n, "structure": structure,
             **{f"param_{k}": v for k, v in params.items()},
-            "cells": st.get("cells"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
+            "cells": st.get("cells"), "M1": st.get("M1"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
             "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
             "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds": tm.median, "seconds_min": tm.min,
             "spread": tm.spread, "ns_per_ray": tm.median / r.n * 1e9,

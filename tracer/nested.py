@@ -250,6 +250,7 @@ class NestedGrid(Accel):
     (M = m2_factor * N_l cells in a sub-grid of N_l triangles); ``m1_scale``/``m2_scale`` multiply
     the per-axis resolutions m1 = M1^(1/3) and m2 (Ize's Fig. 5 sweep); ``leaf_threshold`` (cells
     with at most this many triangles stay leaves); ``exact`` (triangle/box overlap assignment).
+    ``m2_rule`` "skinny" gives sub-grids M2 = (N2 Ti/Ts)^1.5 (Sec 4.4, Ti/Ts = m2_factor / 2);
     ``depth_rule`` "linear" (default: every lower level uses m2_factor * N_l) or "eq16" (Ize Eq. 16
     applied recursively: with r levels left a grid of N_l triangles gets (m2_factor N_l)^(3/(2r+1))
     cells; the top grid too when ``m1_rule="ize"``; identical to "linear" for two levels).
@@ -258,8 +259,9 @@ class NestedGrid(Accel):
     name = "nested"
 
     def __init__(self, levels=2, m1=None, m1_rule=None, m2_factor=IZE_M_FACTOR, m1_scale=1.0,
-                 m2_scale=1.0, leaf_threshold=2, exact=True, depth_rule="linear"):
+                 m2_scale=1.0, leaf_threshold=2, exact=True, depth_rule="linear", m2_rule="linear"):
         self.levels, self.m1, self.m1_rule, self.m2_factor = levels, m1, m1_rule, m2_factor
+        self.m2_rule = m2_rule
         self.m1_scale, self.m2_scale, self.leaf_threshold = m1_scale, m2_scale, leaf_threshold
         self.exact, self.depth_rule = exact, depth_rule
 
@@ -272,6 +274,8 @@ class NestedGrid(Accel):
             raise GridcostError(f"unknown m1_rule {rule!r}; known: {', '.join(M1_RULES)}")
         if rule == "cells" and self.m1 is None:
             raise GridcostError("m1_rule='cells' needs m1 (the top-level cell count)")
+        if self.m2_rule not in ("linear", "skinny"):
+            raise GridcostError(f"unknown m2_rule {self.m2_rule!r}; known: linear, skinny")
         if self.depth_rule not in DEPTH_RULES:
             raise GridcostError(f"unknown depth_rule {self.depth_rule!r}; known: {', '.join(DEPTH_RULES)}")
         for k in ("m2_factor", "m1_scale", "m2_scale"):
@@ -286,7 +290,7 @@ class NestedGrid(Accel):
         if rule == "cells":
             m1 = float(self.m1)
         elif rule == "ize_skinny":
-            m1 = IZE_M_FACTOR * n
+            m1 = IZE_M_FACTOR / 2 * n  # Eq 17: M1 = k N Ti/Ts with k = 1, Ti/Ts = 4 (Fig 5 point m1 = 1.6 N^(1/3))
         elif self.depth_rule == "eq16":
             m1 = (IZE_M_FACTOR * n) ** eq16_exponent(self.levels)
         else:
@@ -298,6 +302,8 @@ class NestedGrid(Accel):
     def _sub_cells(self, n2: np.ndarray, level: int) -> np.ndarray:
         """Cell counts of sub-grids at ``level`` (2..levels) holding n2 triangles each."""
         m = self.m2_factor * n2.astype(np.float64)
+        if self.m2_rule == "skinny":  # Sec 4.4: M2 = (N2 Ti/Ts)^1.5 with Ti/Ts = m2_factor / 2
+            return (m / 2) ** 1.5
         if self.depth_rule == "eq16":
             m = m ** eq16_exponent(self.levels - level + 1)
         return m
