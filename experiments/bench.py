@@ -27,6 +27,8 @@ VARIANTS = {
     "nested": ("nested", {}),
     "kdtree": ("kdtree", {}),
     "bvh": ("bvh", {}),
+    "cgt": ("cgt", {}),
+    "sortedlists": ("sortedlists", {}),
 }
 
 

@@ -28,6 +28,8 @@ STRUCTURES = {
     "nested": "tracer.nested:NestedGrid",
     "kdtree": "tracer.kdtree:KdTree",
     "bvh": "tracer.bvh:BVH",
+    "cgt": "tracer.packet:CoherentGrid",
+    "sortedlists": "tracer.sortedlists:SortedLists",
 }
 
 

@@ -69,9 +69,19 @@ def camera_frame(scene, eye_dir=(0.55, 0.45, 0.7), fov_deg: float = 45.0):
     return eye, fwd, right, up, np.tan(np.radians(fov_deg) / 2)
 
 
+def tile_order(width: int, height: int, tile: int) -> np.ndarray:
+    """Permutation of a row-major W x H image into tile x tile blocks (row-major inside each tile,
+    tiles row-major; partial tiles at the right/bottom edges keep their pixels together)."""
+    y, x = np.mgrid[0:height, 0:width]
+    key = ((y // tile) * ((width + tile - 1) // tile) + x // tile) * (tile * tile) + (y % tile) * tile + x % tile
+    return np.argsort(key.ravel(), kind="stable")
+
+
 def camera_rays(scene, width: int, height: int | None = None, seed: int = 0, jitter: bool = False,
-                eye_dir=(0.55, 0.45, 0.7)) -> Rays:
-    """Pinhole primary rays (row-major, W x H) from a camera framing the bounding sphere."""
+                eye_dir=(0.55, 0.45, 0.7), tile: int = 8) -> Rays:
+    """Pinhole primary rays of a W x H image from a camera framing the bounding sphere, ordered in
+    ``tile`` x ``tile`` pixel blocks (so consecutive rays are coherent packets; ``tile=1`` gives
+    plain row-major order)."""
     height = height or width
     eye, fwd, right, up, tanh = camera_frame(scene, eye_dir)
     rng = np.random.default_rng(seed)
@@ -81,6 +91,8 @@ def camera_rays(scene, width: int, height: int | None = None, seed: int = 0, jit
     sy = (1 - 2 * (jy + off[1]) / height) * tanh
     d = fwd + sx[..., None] * right + sy[..., None] * up
     d = d.reshape(-1, 3)
+    if tile > 1:
+        d = d[tile_order(width, height, tile)]
     return _pack(np.broadcast_to(eye, d.shape), d, "camera", seed)
 
 

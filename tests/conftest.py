@@ -1,0 +1,163 @@
+"""Shared fixtures: a per-session mesh cache, the small test scenes, mesh-file writers and a CLI runner.
+
+The parsed-mesh cache ($GRIDCOST_CACHE) points at a session temporary directory, set before any
+scene is loaded, so tests never read or write the user's ``~/.cache/gridcost`` and subprocesses
+(the CLI tests) inherit the same directory.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+#: the small scenes the structure tests run on (each loads/builds in well under a second)
+SMALL_SCENES = ("bunny-948", "cornell", "cylinder-196", "particles-2000")
+
+#: small mesh files for the bad-input tests: name -> (content or None for a directory, words the
+#: error message must contain one of, besides the path)
+BAD_MESHES = {
+    "missing": ("missing.obj", None, ("no such file",)),
+    "unknown-format": ("points.xyz", "1 2 3\n4 5 6\n", ("unknown mesh format", ".xyz")),
+    "directory": ("folder.obj", "<dir>", ("directory",)),
+    "zero-bytes": ("zero.obj", "", ("empty", "0 triangles", "0 faces", "no triangle")),
+    "no-faces": ("nofaces.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n",
+                 ("empty", "0 triangles", "0 faces", "no triangle")),
+    "nan-vertex": ("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", ("NaN",)),
+    "inf-vertex": ("inf.obj", "v 0 0 0\nv inf 0 0\nv 0 1 0\nf 1 2 3\n", ("inf",)),
+    "zero-bytes-ply": ("zero.ply", "", ("cannot parse", "empty", "0 triangles")),
+}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def gridcost_cache(tmp_path_factory):
+    """$GRIDCOST_CACHE -> a session temporary directory (restored afterwards)."""
+    path = tmp_path_factory.mktemp("gridcost-cache")
+    old = os.environ.get("GRIDCOST_CACHE")
+    os.environ["GRIDCOST_CACHE"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("GRIDCOST_CACHE", None)
+    else:
+        os.environ["GRIDCOST_CACHE"] = old
+
+
+_SCENES: dict = {}
+
+
+@pytest.fixture(scope="session")
+def load(gridcost_cache):
+    """``load(name)``: a named scene, loaded once per session (after the cache is redirected)."""
+    from tracer.scene import load_scene
+
+    def _load(name: str):
+        if name not in _SCENES:
+            _SCENES[name] = load_scene(name)
+        return _SCENES[name]
+
+    return _load
+
+
+@pytest.fixture(scope="session")
+def bunny(load):
+    return load("bunny-948")
+
+
+@pytest.fixture(scope="session")
+def cornell(load):
+    return load("cornell")
+
+
+@pytest.fixture(scope="session")
+def cylinder(load):
+    return load("cylinder-196")
+
+
+@pytest.fixture(scope="session")
+def particles(load):
+    return load("particles-2000")
+
+
+@pytest.fixture(scope="session", params=SMALL_SCENES)
+def small_scene(request, load):
+    """Each of the small scenes in turn."""
+    return load(request.param)
+
+
+def write_file(directory: Path, name: str, content) -> Path:
+    """Write ``content`` (str, bytes, or ``"<dir>"`` for a directory, None for nothing) to directory/name."""
+    path = Path(directory) / name
+    if content is None:
+        return path
+    if content == "<dir>":
+        path.mkdir(parents=True, exist_ok=True)
+    elif isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    return path
+
+
+def obj_text(tris) -> str:
+    """An OBJ file holding the triangles ``tris`` (m, 3, 3), three fresh vertices per face."""
+    lines = []
+    for k, tri in enumerate(tris):
+        lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in (map(float, v) for v in tri)]
+        lines.append(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}")
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture
+def write_mesh(tmp_path):
+    """``write_mesh(name, content)`` -> Path of a small mesh file in this test's tmp dir; content may
+    be text, bytes, ``"<dir>"`` or an (m, 3, 3) triangle array (written as OBJ)."""
+
+    def _write(name: str, content) -> Path:
+        if content is not None and not isinstance(content, (str, bytes)):
+            content = obj_text(content)
+        return write_file(tmp_path, name, content)
+
+    return _write
+
+
+@pytest.fixture(scope="session")
+def bad_meshes(tmp_path_factory):
+    """case -> (path, causes): the bad mesh files of :data:`BAD_MESHES`, written once per session."""
+    d = tmp_path_factory.mktemp("bad-meshes")
+    return {case: (write_file(d, fname, content), causes) for case, (fname, content, causes) in BAD_MESHES.items()}
+
+
+@pytest.fixture(scope="session")
+def run_cli(gridcost_cache):
+    """``run_cli(*args, env=None, code=None)``: ``python -m experiments.run *args`` in the repository
+    (or ``python -c code`` when ``code`` is given); returns the CompletedProcess."""
+
+    def _run(*args, env=None, code=None, timeout=120):
+        full_env = dict(os.environ)
+        full_env.update(env or {})
+        cmd = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "experiments.run", *args]
+        return subprocess.run(cmd, cwd=str(REPO), capture_output=True, text=True, env=full_env, timeout=timeout)
+
+    return _run
+
+
+def assert_cli_error(proc, path) -> str:
+    """The CLI's bad-input contract: exit 2, one stderr line 'error: ...' naming ``path``, no traceback."""
+    assert proc.returncode == 2, (proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stderr, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("error:"), lines[0]
+    if path is not None:
+        assert str(path) in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.fixture(scope="session")
+def cli_error():
+    """:func:`assert_cli_error` as a fixture."""
+    return assert_cli_error
