@@ -184,6 +184,12 @@ class ExponentFit:
         return np.exp(self.log_c_) * np.asarray(x, float) ** self.alpha_
 
 
+def work_cost(steps, tests, ti_over_ts: float = 4.0):
+    """Ize's cost in units of Ts from the tracer's counters: steps + (Ti/Ts) tests. Deterministic
+    (no timing noise), so exponents of its optimum test the theory's counting argument alone."""
+    return np.asarray(steps, float) + ti_over_ts * np.asarray(tests, float)
+
+
 def refine_minimum(M, T) -> float:
     """Best M of a sweep: the measured minimum, refined by a parabola in (log M, log T) through it
     and its neighbours (kept inside the bracket)."""

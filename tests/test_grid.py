@@ -115,43 +115,101 @@ def test_flat_single_triangle_scene():
 
 
 # ---------------------------------------------------------------- ties
-@pytest.fixture(scope="module")
-def dup_scene(bunny):
-    """bunny-948 with its first 100 faces appended again (same vertices, reversed winding)."""
-    return Scene(np.concatenate([bunny.tris, bunny.tris[:100, ::-1]]), "bunny-dup")
+FLOAT32_BUG = ("tracer/geometry.py ray_triangle (and its callers in oracle.py / grid.py): Numba's float(x) "
+               "keeps a float32 value float32, so with float32 vertices and rays (every kernel call) the whole "
+               "Moeller-Trumbore test runs in float32, not float64 as documented; t is accurate to ~1e-7 only")
 
 
-def test_duplicate_faces_no_disagreement(dup_scene):
-    scene = dup_scene
-    grid = UniformGrid().build(scene)
-    # rays aimed at the duplicated faces' centroids
-    rng = np.random.default_rng(3)
-    target = scene.tris[:100].astype(np.float64).mean(axis=1)
+def _dup_scene(bunny, reverse: bool):
+    """bunny-948 with its first 100 faces appended again (same vertices; reversed winding if asked)."""
+    extra = bunny.tris[:100, ::-1] if reverse else bunny.tris[:100]
+    return Scene(np.concatenate([bunny.tris, extra]), "bunny-dup-rev" if reverse else "bunny-dup")
+
+
+def _rays_at_first_faces(scene, k=100, seed=3):
+    rng = np.random.default_rng(seed)
+    target = scene.tris[:k].astype(np.float64).mean(axis=1)
     lo, hi = scene.bounds.astype(np.float64)
-    o = (lo + hi) / 2 + np.linalg.norm(hi - lo) * rng.normal(size=(100, 3))
-    o, d = o.astype(np.float32), (target - o).astype(np.float32)
+    o = (lo + hi) / 2 + np.linalg.norm(hi - lo) * rng.normal(size=(k, 3))
+    return o.astype(np.float32), (target - o).astype(np.float32)
+
+
+def _check_duplicates(scene):
+    grid = UniformGrid().build(scene)
+    o, d = _rays_at_first_faces(scene)
     hits, _ = grid.intersect(o, d)
     ref, ties = oracle_intersect(scene, o, d)
     res = compare(hits, ref, ties)
     assert res["disagreements"] == 0, res
     dup_hit = (ref.tri_id >= 0) & (ref.tri_id < 100)
     assert dup_hit.sum() > 20
-    assert (ties[dup_hit] >= 1).all()  # the oracle sees the duplicate at the same t
+    assert (ties[dup_hit] >= 1).all(), ties[dup_hit]  # the oracle sees the copy at the same t
+    return ref, ties, dup_hit
+
+
+def test_duplicate_faces_ties_no_disagreement(bunny):
+    scene = _dup_scene(bunny, reverse=False)
+    ref, ties, dup_hit = _check_duplicates(scene)
+    grid = UniformGrid(mailbox=True).build(scene)
     for kind in KINDS:
         rays = make_rays(scene, kind, 1000, seed=2)
         h, _ = grid.intersect(rays.origins, rays.directions)
         r, tt = oracle_intersect(scene, rays.origins, rays.directions)
         assert compare(h, r, tt)["disagreements"] == 0, kind
-    # a structure that returns the other copy at the same t: a tie, not a disagreement
+    # a structure that returns the other copy at the same t: a tie, counted apart, not a disagreement
     swapped = np.where(dup_hit, ref.tri_id + scene.n - 100, ref.tri_id).astype(np.int32)
     res = compare(Hits(ref.t.astype(np.float32), swapped), ref, ties)
     assert res["disagreements"] == 0
-    assert res["ties"] == int(dup_hit.sum())
-    # ... whereas another triangle at the same t where the oracle saw no tie is an id mismatch
+    assert res["ties"] == int(dup_hit.sum()) > 0
+    # ... whereas another triangle where the oracle saw no tie is an id mismatch
     single = (ref.tri_id >= 100) & (ref.tri_id < scene.n - 100) & (ties == 0)
     wrong = np.where(single, (ref.tri_id + 1) % scene.n, ref.tri_id).astype(np.int32)
     res = compare(Hits(ref.t.astype(np.float32), wrong), ref, ties)
     assert res["id_mismatch"] == int(single.sum()) == res["disagreements"] > 0
+    assert res["ties"] == 0
+
+
+@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG + " (a copy with reversed vertex order gets a t that "
+                   "differs by ~1e-7, beyond the oracle's 1e-9 tie tolerance, so no tie is seen)")
+def test_duplicate_faces_reversed_winding_are_ties(bunny):
+    _check_duplicates(_dup_scene(bunny, reverse=True))
+
+
+def test_duplicate_faces_reversed_winding_no_disagreement(bunny):
+    scene = _dup_scene(bunny, reverse=True)
+    grid = UniformGrid().build(scene)
+    o, d = _rays_at_first_faces(scene)
+    hits, _ = grid.intersect(o, d)
+    ref, ties = oracle_intersect(scene, o, d)
+    assert compare(hits, ref, ties)["disagreements"] == 0
+
+
+def _t_float64(o, d, tri):
+    """Reference t in float64 (numpy solve of o + t d = a + u (b - a) + v (c - a))."""
+    a, b, c = np.asarray(tri, np.float64)
+    M = np.column_stack([-np.asarray(d, np.float64), b - a, c - a])
+    return np.linalg.solve(M, np.asarray(o, np.float64) - a)[0]
+
+
+@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG)
+def test_ray_triangle_float32_inputs_computed_in_float64():
+    tri = np.array([[0.1, 0.2, 0.3], [1.7, 0.4, 0.9], [0.3, 1.9, 0.2]], np.float32)
+    o = np.array([0.5, 0.6, 3.3], np.float32)
+    d = (tri.astype(np.float64).mean(0) - o).astype(np.float32)
+    t64 = ray_triangle(*map(float, o), *map(float, d), *map(float, tri.ravel()), 0.0, np.inf)
+    ref = _t_float64(o, d, tri)
+    assert t64 == pytest.approx(ref, rel=1e-12)  # float64 arguments: fine
+    t32 = ray_triangle(*o, *d, *tri.ravel(), 0.0, np.inf)  # float32 arguments, as every kernel passes
+    assert t32 == pytest.approx(ref, rel=1e-12)
+
+
+@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG)
+def test_oracle_t_is_float64_accurate(bunny):
+    rays = rays_for(bunny, "random")
+    ref, _ = oracle_for(bunny, rays)
+    hit = np.flatnonzero(ref.tri_id >= 0)[:200]
+    expected = np.array([_t_float64(rays.origins[i], rays.directions[i], bunny.tris[ref.tri_id[i]]) for i in hit])
+    np.testing.assert_allclose(ref.t[hit], expected, rtol=1e-10)
 
 
 # ---------------------------------------------------------------- counters
@@ -357,7 +415,8 @@ TRI_BOX_CASES = {
     "edge axis separates": ((0, 0, 0), (1, 1, 1), ((0.5, 3, 0), (3, 0.5, 0), (3, 3, 0)), False),
     # bbox overlaps the box, the plane x + y + z = 4 misses it (x + y + z <= 3): plane axis
     "plane separates": ((0, 0, 0), (1, 1, 1), ((4, 0, 0), (0, 4, 0), (0, 0, 4)), False),
-    "tilted edge axis separates": ((0, 0, 0), (1, 1, 1), ((0.5, 2.6, -2), (2.6, 0.5, -2), (2.6, 2.6, 2)), False),
+    # the same, tilted: plane x + y = 3 + 2 z cuts the box (at z = -1), the triangle has x + y >= 3
+    "tilted edge axis separates": ((0, 0, 0), (1, 1, 1), ((-0.5, 3.5, 0), (3.5, -0.5, 0), (2.5, 2.5, 1)), False),
     "off-centre box": ((10, 20, 30), (0.5, 2, 1), ((9.8, 19, 30), (10.2, 19, 30), (10, 23, 30.5)), True),
 }
 

@@ -11,6 +11,8 @@
 ``sphere-N``                UV sphere of about N triangles
 ``knot-N``                  a (3, 2) torus-knot tube of about N triangles
 ``boxes-N``                 N random axis-aligned boxes (12 triangles each)
+``surfpoints-N``            N tiny triangles scattered on a sphere: "points on a surface", the
+                            manifold-like data of Ize Sec 4 with rays that (almost) never hit
 ==========================  ================================================================
 """
 from __future__ import annotations
@@ -27,6 +29,7 @@ PATTERNS = {
     "sphere": re.compile(r"^sphere-(\d+)(k?)$"),
     "knot": re.compile(r"^knot-(\d+)(k?)$"),
     "boxes": re.compile(r"^boxes-(\d+)$"),
+    "surfpoints": re.compile(r"^surfpoints-(\d+)(k?)$"),
 }
 FIXED = ("teapot-in-stadium", "room")
 EXAMPLES = ["cylinder-196", "cylinder-3996", "cylinder-19996", "particles-100k", "teapot-in-stadium",
@@ -68,6 +71,15 @@ def _grid_mesh(P: np.ndarray) -> np.ndarray:
     t1 = np.stack([a, b, c], axis=-2).reshape(-1, 3, 3)
     t2 = np.stack([a, c, d], axis=-2).reshape(-1, 3, 3)
     return np.concatenate([t1, t2]).astype(np.float32)
+
+
+def surfpoints(n: int, seed: int = 3) -> np.ndarray:
+    """n tiny triangles (edge 1e-3 of the mean spacing) at uniform points of the unit sphere."""
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, 1, 3))
+    v /= np.linalg.norm(v, axis=2, keepdims=True)
+    size = 1e-3 * np.sqrt(4 * np.pi / n)
+    return (v + size * (rng.random((n, 3, 3)) - 0.5)).astype(np.float32)
 
 
 def cylinder(n: int) -> np.ndarray:

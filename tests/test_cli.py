@@ -1,0 +1,96 @@
+"""The CLI (``python -m experiments.run``): verify and bench targets, JSON output, exit codes."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tracer.reference import EmbreeAccel
+
+
+def _json(proc) -> dict:
+    assert proc.returncode == 0, (proc.returncode, proc.stderr)
+    assert "Traceback" not in proc.stderr, proc.stderr
+    lines = [line for line in proc.stdout.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stdout  # --json: exactly one JSON object on stdout
+    return json.loads(lines[0])
+
+
+def test_verify_json(run_cli):
+    out = _json(run_cli("verify", "--scene", "bunny-948", "--rays", "2000", "--json"))
+    assert out["faces"] == 948 and out["scene"] == "bunny-948" and out["structure"] == "grid"
+    assert out["disagreements"] == 0
+    assert set(out["kinds"]) == {"random", "camera", "path", "adversarial"}
+    assert out["rays"] == sum(k["rays"] for k in out["kinds"].values())
+    assert 4 * 2000 * 0.3 < out["rays"] <= 4 * 2000
+    assert out["kinds"]["random"]["rays"] == 2000 and out["kinds"]["adversarial"]["rays"] == 2000
+    assert all(k["disagreements"] == 0 for k in out["kinds"].values())
+    assert out["hits"] > 0 and out["stats"]["cells"] > 0
+
+
+def test_verify_adversarial(run_cli):
+    out = _json(run_cli("verify", "--scene", "bunny-948", "--rays", "2000", "--kind", "adversarial",
+                        "--param", "mailbox=true", "--param", "exact=false", "--json"))
+    assert list(out["kinds"]) == ["adversarial"]
+    assert out["rays"] == 2000 and out["disagreements"] == 0
+    assert out["params"] == {"mailbox": True, "exact": False}
+    assert out["stats"]["mailbox"] is True and out["stats"]["exact"] is False
+
+
+def test_verify_text_output(run_cli):
+    proc = run_cli("verify", "--scene", "cylinder-196", "--rays", "500", "--kind", "random")
+    assert proc.returncode == 0, proc.stderr
+    assert "cylinder-196" in proc.stdout and "0 disagreements" in proc.stdout
+
+
+def test_bench_json(run_cli, tmp_path):
+    out_dir = tmp_path / "results"
+    out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",
+                        "--structures", "grid,embree", "--json", "--out", str(out_dir)))
+    assert out["scene"] == "bunny-948" and out["faces"] == 948 and out["rays"] == 5000
+    grid = out["structures"]["grid"]
+    for key in ("build_s", "random_mrays", "camera_mrays"):
+        assert grid[key] > 0, key
+    assert grid["random_per_ray"]["steps"] > 0
+    written = list((out_dir / "bench").glob("bunny-948-*.json"))
+    assert len(written) == 1
+    assert json.loads(written[0].read_text())["structures"].keys() == out["structures"].keys()
+    if not EmbreeAccel.available():
+        assert "embree" in out["skipped"]
+        pytest.skip("embreex is not installed: Embree assertions skipped")
+    emb = out["structures"]["embree"]
+    for key in ("build_s", "random_mrays", "camera_mrays"):
+        assert emb[key] > 0, key
+    assert set(out["ratios"]["grid/embree"]) >= {"random", "camera", "build"}
+
+
+# ---------------------------------------------------------------- bad input: exit 2, one line
+@pytest.mark.parametrize("case", ["missing", "unknown-format", "directory", "no-faces", "nan-vertex"])
+def test_bad_mesh_exit_2(case, bad_meshes, run_cli, cli_error):
+    path, causes = bad_meshes[case]
+    line = cli_error(run_cli("verify", "--mesh", str(path), "--rays", "10"), path)
+    assert any(c.lower() in line.lower() for c in causes), line
+
+
+def test_bench_bad_mesh_exit_2(bad_meshes, run_cli, cli_error):
+    path, _ = bad_meshes["nan-vertex"]
+    cli_error(run_cli("bench", "--mesh", str(path), "--rays", "10", "--repeats", "1", "--structures", "grid"), path)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["verify", "--scene", "no-such-scene", "--rays", "10"], "unknown scene 'no-such-scene'"),
+    (["verify", "--scene", "bunny-948", "--rays", "0"], "rays"),
+    (["verify", "--scene", "bunny-948", "--rays", "10", "--structure", "octree"], "unknown structure 'octree'"),
+    (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells"], "key=value"),
+    (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells=0"], "cell"),
+])
+def test_bad_arguments_exit_2(args, words, run_cli, cli_error):
+    line = cli_error(run_cli(*args), None)
+    assert words in line, line
+
+
+def test_memory_budget_exit_2(run_cli, cli_error):
+    proc = run_cli("verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells=10000000",
+                   env={"GRIDCOST_MEMORY_BUDGET": "1M"})
+    line = cli_error(proc, None)
+    assert "MiB" in line or "GiB" in line, line
