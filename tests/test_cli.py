@@ -65,11 +65,22 @@ def test_bench_json(run_cli, tmp_path):
 
 
 # ---------------------------------------------------------------- bad input: exit 2, one line
-@pytest.mark.parametrize("case", ["missing", "unknown-format", "directory", "no-faces", "nan-vertex"])
+@pytest.mark.parametrize("case", ["missing", "nan-vertex"])
 def test_bad_mesh_exit_2(case, bad_meshes, run_cli, cli_error):
     path, causes = bad_meshes[case]
     line = cli_error(run_cli("verify", "--mesh", str(path), "--rays", "10"), path)
     assert any(c.lower() in line.lower() for c in causes), line
+
+
+@pytest.mark.parametrize("case", ["missing", "unknown-format", "directory", "zero-bytes", "no-faces", "nan-vertex",
+                                  "inf-vertex", "zero-bytes-ply"])
+def test_bad_mesh_exit_2_in_process(case, bad_meshes, capsys):
+    from experiments.run import main
+    path, causes = bad_meshes[case]
+    assert main(["verify", "--mesh", str(path), "--rays", "10"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and str(path) in lines[0], lines
+    assert any(c.lower() in lines[0].lower() for c in causes), lines[0]
 
 
 def test_bench_bad_mesh_exit_2(bad_meshes, run_cli, cli_error):
@@ -77,16 +88,30 @@ def test_bench_bad_mesh_exit_2(bad_meshes, run_cli, cli_error):
     cli_error(run_cli("bench", "--mesh", str(path), "--rays", "10", "--repeats", "1", "--structures", "grid"), path)
 
 
-@pytest.mark.parametrize("args, words", [
+BAD_ARGS = [
     (["verify", "--scene", "no-such-scene", "--rays", "10"], "unknown scene 'no-such-scene'"),
     (["verify", "--scene", "bunny-948", "--rays", "0"], "rays"),
     (["verify", "--scene", "bunny-948", "--rays", "10", "--structure", "octree"], "unknown structure 'octree'"),
     (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells"], "key=value"),
     (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells=0"], "cell"),
-])
-def test_bad_arguments_exit_2(args, words, run_cli, cli_error):
-    line = cli_error(run_cli(*args), None)
-    assert words in line, line
+]
+
+
+def test_bad_arguments_exit_2_subprocess(run_cli, cli_error):
+    args, words = BAD_ARGS[0]
+    assert words in cli_error(run_cli(*args), None)
+
+
+@pytest.mark.parametrize("args, words", BAD_ARGS)
+def test_bad_arguments_exit_2(args, words, capsys):
+    """In-process (``experiments.run.main``): return 2, one 'error:' line on stderr, nothing on stdout."""
+    from experiments.run import main
+    assert main(args) == 2
+    cap = capsys.readouterr()
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:"), cap.err
+    assert words in lines[0], lines[0]
+    assert cap.out == ""
 
 
 def test_memory_budget_exit_2(run_cli, cli_error):

@@ -1,0 +1,117 @@
+"""Experiment pipeline: CLI smoke tests in --quick mode, resumability, atomic writes, Dask = local."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from experiments.results import PointStore, atomic_write
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_cli(*args, out=None, check=True):
+    cmd = [sys.executable, "-m", "experiments.run", *args] + (["--out", str(out)] if out else [])
+    p = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=900,
+                       env={**os.environ, "TQDM_DISABLE": "1"})
+    if check:
+        assert p.returncode == 0, p.stderr[-2000:]
+    return p
+
+
+@pytest.fixture(scope="module")
+def quick_out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("results")
+    run_cli("table2", "--quick", "--scenes", "bunny-948", "--rays", "3000", out=out)
+    return out
+
+
+def test_table2_quick_writes_everything(quick_out):
+    d = quick_out / "table2"
+    for f in ("table2.csv", "table2_summary.csv", "fits.csv", "summary.md", "meta.json"):
+        assert (d / f).exists(), f
+    df = pd.read_csv(d / "table2.csv")
+    assert {"scene", "N", "structure", "cells", "ray_kind", "rays", "seconds", "steps", "tests", "threads"} <= set(df.columns)
+    assert set(df.ray_kind) == {"random", "camera"}
+    assert (df.seconds > 0).all() and (df.steps > 0).all()
+    meta = json.loads((d / "meta.json").read_text())
+    assert meta["git_commit"] and meta["host"]["cpu"] is not None and meta["rays_per_kind"] == 3000
+    text = (d / "summary.md").read_text()
+    assert "29,172" in text  # the paper's empirical M for bunny 948 beside ours
+    assert (quick_out / "README.md").exists()
+
+
+def test_rerun_resumes_with_identical_rows(quick_out):
+    before = pd.read_csv(quick_out / "table2" / "table2.csv")
+    npoints = len(list((quick_out / "points").glob("*.json")))
+    run_cli("table2", "--quick", "--scenes", "bunny-948", "--rays", "3000", out=quick_out)
+    after = pd.read_csv(quick_out / "table2" / "table2.csv")
+    assert len(list((quick_out / "points").glob("*.json"))) == npoints  # nothing re-measured
+    pd.testing.assert_frame_equal(before, after)
+
+
+def test_point_store_and_atomic_write(tmp_path):
+    store = PointStore(tmp_path)
+    calls = []
+    row, cached = store.measure({"a": 1}, lambda: calls.append(1) or {"x": 1.5})
+    assert not cached and row == {"x": 1.5}
+    row, cached = store.measure({"a": 1}, lambda: calls.append(1) or {"x": 2.0})
+    assert cached and row == {"x": 1.5} and len(calls) == 1
+    assert PointStore(tmp_path, force=True).get({"a": 1}) is None  # --force re-measures
+
+    target = tmp_path / "f.txt"
+    atomic_write(target, "old")
+
+    class Boom(Exception):
+        pass
+
+    class Exploding(str):
+        def encode(self, *a):
+            raise Boom
+
+    with pytest.raises(Boom):
+        atomic_write(target, Exploding("new"))
+    assert target.read_text() == "old"  # an interrupted write leaves the old file whole
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_dask_local_cluster_equals_local(tmp_path):
+    pytest.importorskip("dask.distributed")
+    from experiments.executor import LocalExecutor, set_executor
+    spec = {"scene": "bunny-948", "N": 948, "structure": "grid", "params": {"cells": 4000.0},
+            "rays": {"random": [2000, 0]}, "repeats": 1}
+    _, local_rows = next(LocalExecutor().map([spec]))
+    ex = set_executor("local")
+    try:
+        _, dask_rows = next(ex.map([spec]))
+    finally:
+        set_executor(None)
+    for a, b in zip(local_rows, dask_rows):
+        for k in ("cells", "refs", "steps", "tests", "setups", "hits"):
+            assert a[k] == b[k], k
+        assert "worker" in b
+
+
+@pytest.mark.parametrize("target", ["derive", "table3", "table4", "fig5", "exponents", "fit"])
+def test_every_target_runs_quick(target, tmp_path):
+    extra = {"table3": ["--scenes", "cylinder-196", "--rays", "2000"],
+             "table4": ["--scenes", "bunny-948", "--rays", "2000"],
+             "fig5": ["--scenes", "bunny-948:compact", "--rays", "2000"],
+             "exponents": ["--families", "particles", "--rays", "2000"],
+             "fit": ["--scene", "bunny-948", "--rays", "2000", "--json"]}.get(target, [])
+    p = run_cli(target, "--quick", *extra, out=tmp_path)
+    if target == "fit":
+        out = json.loads(p.stdout.strip().splitlines()[-1])
+        for k in ("ts", "ti", "tsetup", "ti_over_ts", "mape", "m_pred", "m_best", "penalty", "model"):
+            assert k in out
+    written = {f.name for f in (tmp_path / target).iterdir()}
+    assert "summary.md" in written or "meta.json" in written, written
+
+
+def test_bad_input_exit_code(tmp_path):
+    p = run_cli("table2", "--quick", "--scenes", "no-such-scene", out=tmp_path, check=False)
+    assert p.returncode == 2
+    assert p.stderr.startswith("error:") and "Traceback" not in p.stderr
