@@ -138,7 +138,7 @@ class CounterCostFit:
             idx = rng.integers(0, len(T), len(T))
             c, _ = nnls(X[idx] * w[idx, None], T[idx] * w[idx])
             boots.append(c[-2:])
-        boots = np.array(boots)
+        boots = np.array(boots) if boots else np.full((1, 2), np.nan)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = boots[:, 1] / boots[:, 0]
         self.ci_ = {"ts": tuple(float(v) for v in _ci(boots[:, 0])),

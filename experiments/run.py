@@ -33,11 +33,12 @@ TARGETS: dict[str, tuple[str, str]] = {
     "selector": ("experiments.hapala_selector", "grid or kd-tree for a scene and a ray budget: the decision and its estimate"),
     "havran": ("experiments.hapala_havran", "Havran scene statistics from the grid (sparseness, maxRefs, moments)"),
     "exponents": ("experiments.ize_exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
+    "predict": ("experiments.ize_predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
     "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2", "table3", "table4", "fig2", "fig5", "exponents"]
+ALL_ORDER = ["derive", "table2", "predict", "table3", "table4", "fig2", "fig5", "exponents"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
