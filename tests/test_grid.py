@@ -115,9 +115,6 @@ def test_flat_single_triangle_scene():
 
 
 # ---------------------------------------------------------------- ties
-FLOAT32_BUG = ("tracer/geometry.py ray_triangle (and its callers in oracle.py / grid.py): Numba's float(x) "
-               "keeps a float32 value float32, so with float32 vertices and rays (every kernel call) the whole "
-               "Moeller-Trumbore test runs in float32, not float64 as documented; t is accurate to ~1e-7 only")
 
 
 def _dup_scene(bunny, reverse: bool):
@@ -169,8 +166,6 @@ def test_duplicate_faces_ties_no_disagreement(bunny):
     assert res["ties"] == 0
 
 
-@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG + " (a copy with reversed vertex order gets a t that "
-                   "differs by ~1e-7, beyond the oracle's 1e-9 tie tolerance, so no tie is seen)")
 def test_duplicate_faces_reversed_winding_are_ties(bunny):
     _check_duplicates(_dup_scene(bunny, reverse=True))
 
@@ -191,7 +186,6 @@ def _t_float64(o, d, tri):
     return np.linalg.solve(M, np.asarray(o, np.float64) - a)[0]
 
 
-@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG)
 def test_ray_triangle_float32_inputs_computed_in_float64():
     tri = np.array([[0.1, 0.2, 0.3], [1.7, 0.4, 0.9], [0.3, 1.9, 0.2]], np.float32)
     o = np.array([0.5, 0.6, 3.3], np.float32)
@@ -203,7 +197,6 @@ def test_ray_triangle_float32_inputs_computed_in_float64():
     assert t32 == pytest.approx(ref, rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=FLOAT32_BUG)
 def test_oracle_t_is_float64_accurate(bunny):
     rays = rays_for(bunny, "random")
     ref, _ = oracle_for(bunny, rays)
@@ -297,9 +290,6 @@ def test_res_pbrt():
     assert (res_pbrt(np.asarray(BOUNDS["long"], float), 1) >= 1).all()
 
 
-@pytest.mark.xfail(strict=True, reason="tracer/grid.py res_pbrt rounds down (np.floor) where pbrt-v2 "
-                   "GridAccel rounds to nearest (Round2Int(delta[axis] * voxelsPerUnitDist), then "
-                   "Clamp(.., 1, 64))")
 def test_res_pbrt_matches_pbrt_v2_rounding():
     # 3 * 948^(1/3) = 29.47 on x; 14.74 on y; 7.37 on z -> pbrt-v2: (29, 15, 7)
     assert res_pbrt([[0, 0, 0], [1, 0.5, 0.25]], 948).tolist() == [29, 15, 7]

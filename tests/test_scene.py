@@ -18,8 +18,6 @@ SMALL = sorted(name for name, row in MANIFEST.items() if int(row["faces"]) < 20_
 #: OBJ files that use relative (negative) face indices, which the loader resolves wrongly (see
 #: test_obj_relative_indices): their geometry differs from the file's
 RELATIVE_INDEX_OBJS = {"cornell", "cornell-measured"}
-RELATIVE_INDEX_BUG = ("tracer/scene.py (trimesh OBJ loader): relative face indices 'f -4 -3 -2 -1' are "
-                      "resolved against the final vertex count, not the count at the face")
 
 
 def tri_areas(tris) -> np.ndarray:
@@ -73,9 +71,7 @@ def test_manifest_mesh_face_count(name):
     assert scene.report["faces_loaded"] == int(row["faces"])
 
 
-@pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=RELATIVE_INDEX_BUG)) if n in RELATIVE_INDEX_OBJS
-    else n for n in SMALL if MANIFEST[n]["path"].endswith(".obj")])
+@pytest.mark.parametrize("name", [n for n in SMALL if MANIFEST[n]["path"].endswith(".obj")])
 def test_obj_geometry_matches_independent_parse(name):
     """The loaded triangles are exactly the file's triangles (compared order/winding-independently)."""
     path = MANIFEST[name]["path"]
@@ -85,7 +81,6 @@ def test_obj_geometry_matches_independent_parse(name):
     np.testing.assert_array_equal(canonical(got), canonical(expected))
 
 
-@pytest.mark.xfail(strict=True, reason=RELATIVE_INDEX_BUG)
 def test_obj_relative_indices(write_mesh):
     """Two quads written with relative indices, one at z=0 and one at z=1 (OBJ: a negative index -k
     is the k-th most recently defined vertex *at that line*)."""
@@ -97,7 +92,6 @@ def test_obj_relative_indices(write_mesh):
     np.testing.assert_array_equal(canonical(scene.tris), canonical(parse_obj(path)))
 
 
-@pytest.mark.xfail(strict=True, reason=RELATIVE_INDEX_BUG)
 def test_cornell_box_is_the_room(cornell):
     """CornellBox-Original: floor, ceiling and three walls (about 2 x 2 x 2) and two boxes, no zero-area
     triangles. Loaded, it is 18 degenerate triangles and copies of one box face."""
@@ -221,11 +215,8 @@ end_header
 """
 #: the decoded triangles (as vertex-index sets); (2 3 3), (3 3 4), (3 4 4), (4 4 5) are stitching
 STRIP_TRIS = [(0, 1, 2), (1, 2, 3), (4, 5, 6), (5, 6, 7), (2, 3, 8), (3, 8, 9)]
-STRIP_BUG = ("tracer/scene.py _read(): trimesh loads a faceless PLY as a PointCloud and _read raises "
-             "'holds no triangle mesh' before load_mesh reaches the strip decoder (_ply_strips/_decode_strips)")
 
 
-@pytest.mark.xfail(strict=True, reason=STRIP_BUG)
 def test_ply_triangle_strips(write_mesh):
     path = write_mesh("strips.ply", STRIP_PLY)
     scene = load_mesh(path)
@@ -240,7 +231,6 @@ def test_ply_triangle_strips(write_mesh):
     assert (np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])[:, 2] > 0).all()
 
 
-@pytest.mark.xfail(strict=True, reason=STRIP_BUG)
 def test_ply_triangle_strips_cli(write_mesh, run_cli):
     path = write_mesh("strips.ply", STRIP_PLY)
     proc = run_cli("verify", "--mesh", str(path), "--rays", "10", "--kind", "random", "--json")

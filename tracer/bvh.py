@@ -7,9 +7,9 @@ each of the three axes; the split between bins with the least SAH cost
 1). A node of at most ``max_leaf`` (4) triangles becomes a leaf when that is no dearer than the
 best split (cost N); larger nodes are always split (by index halves when all centroids coincide).
 
-Layout (depth-first, left child implicit at ``i + 1``): ``bounds_`` (nodes, 6) float32
-[lo xyz, hi xyz] and ``info_`` (nodes, 2) int32: interior ``[right child, 0]``, leaf
-``[offset, count >= 1]``; ``tri_ids_`` and ``tri_verts_`` (N, 9) float32 hold the triangles in
+Layout (depth-first, left child implicit at ``i + 1``): ``nodes_`` (nodes, 8) int32 records of
+32 bytes, ``[lo xyz, hi xyz (float32 bits), a, b]`` — interior ``a`` = right child, ``b`` = 0;
+leaf ``a`` = offset, ``b`` = count >= 1 — and ``nodes_f_`` their float32 view; ``tri_ids_`` and ``tri_verts_`` (N, 9) float32 hold the triangles in
 leaf order.
 
 Traversal: at an interior node both child boxes are tested (float64 slab test that treats an
@@ -30,7 +30,7 @@ from numba import prange
 from tracer._jit import jit, pjit
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
-from tracer.geometry import INF, ray_box, ray_triangle
+from tracer.geometry import INF, ray_triangle
 from tracer.kdtree import root_box
 from tracer.memory import check_budget
 
@@ -196,127 +196,143 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
 
 # ---------------------------------------------------------------- traversal
 @jit(inline="always")
-def _box(B, k, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim):
-    """Slab test of node k's box (``s*`` = 0 or 3: which face is near on each axis). NaN products
-    (origin on a slab plane, zero direction) are ignored, i.e. count as inside."""
+def _box(nf, base, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim):
+    """Slab test of the node box at ``nf[base:base + 6]`` in float64 (``s*``: 0 or 3, which face is
+    near on each axis). NaN products (origin on a slab plane, zero direction) are ignored, i.e.
+    count as inside. Returns (t_enter, t_leave)."""
     tn = tmin
     tf = tlim
-    a = (float(B[k, sx]) - ox) * ix
+    a = (np.float64(nf[base + sx]) - ox) * ix
     if a > tn:
         tn = a
-    a = (float(B[k, 3 - sx]) - ox) * ix
+    a = (np.float64(nf[base + (np.uintp(3) - sx)]) - ox) * ix
     if a < tf:
         tf = a
-    a = (float(B[k, 1 + sy]) - oy) * iy
+    a = (np.float64(nf[base + np.uintp(1) + sy]) - oy) * iy
     if a > tn:
         tn = a
-    a = (float(B[k, 4 - sy]) - oy) * iy
+    a = (np.float64(nf[base + (np.uintp(4) - sy)]) - oy) * iy
     if a < tf:
         tf = a
-    a = (float(B[k, 2 + sz]) - oz) * iz
+    a = (np.float64(nf[base + np.uintp(2) + sz]) - oz) * iz
     if a > tn:
         tn = a
-    a = (float(B[k, 5 - sz]) - oz) * iz
+    a = (np.float64(nf[base + (np.uintp(5) - sz)]) - oz) * iz
     if a < tf:
         tf = a
     return tn, tf
 
 
-@jit(inline="always")
-def bvh_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, box, diag, B, info, tv, ids, sn, st):
-    """Trace one ray; returns (t, tri_id, setups, steps, tests, nodes). ``box`` is the padded
-    root box (robust miss test, finite t-range for ``tol``)."""
-    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, box[0], box[1], box[2], box[3], box[4], box[5],
-                     tmin, tmax)
-    if t0 > t1:
-        return INF, -1, 0, 0, 0, 0
-    ix = 1.0 / dx
-    iy = 1.0 / dy
-    iz = 1.0 / dz
-    sx = 0 if ix >= 0.0 else 3
-    sy = 0 if iy >= 0.0 else 3
-    sz = 0 if iz >= 0.0 else 3
-    best = float(tmax)
-    tol = T_EPS * (max(abs(t0), abs(t1)) + diag / math.sqrt(dx * dx + dy * dy + dz * dz))
-    best_id = -1
-    nvis = 0
-    leaves = 0
-    tests = 0
-    sp = 0
-    node = 0
-    while True:
-        nvis += 1
-        cnt = info[node, 1]
-        if cnt > 0:
-            leaves += 1
-            off = info[node, 0]
-            for r in range(off, off + cnt):
-                tests += 1
-                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2], tv[r, 3],
-                                 tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8], tmin, best)
-                if t < best:
-                    best = t
-                    best_id = ids[r]
-                    if anyhit:
-                        return best, best_id, 1, leaves, tests, nvis
-            node = -1
-        else:
-            left = node + 1
-            right = info[node, 0]
-            ln, lf = _box(B, left, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best)
-            rn, rf = _box(B, right, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best)
-            hl = ln <= lf + tol
-            hr = rn <= rf + tol
-            if hl and hr:
-                if ln <= rn:
-                    sn[sp] = right
-                    st[sp] = rn
-                    node = left
+@jit
+def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size,
+              out_t, out_id, counters):
+    """Trace rays lo..hi-1 with one stack. ``ni``/``nf``: flat int32 / float32 views of the
+    (nodes, 8) node records [lo xyz, hi xyz, a, b]."""
+    sn = np.empty(stack_size, np.int64)
+    st = np.empty(stack_size, np.float64)
+    six = np.uintp(6)
+    seven = np.uintp(7)
+    for i in range(lo, hi):
+        # the ray exactly as the oracle passes it to ray_triangle, and in float64 for the boxes
+        ox = float(O[i, 0])
+        oy = float(O[i, 1])
+        oz = float(O[i, 2])
+        dx = float(D[i, 0])
+        dy = float(D[i, 1])
+        dz = float(D[i, 2])
+        px = np.float64(ox)
+        py = np.float64(oy)
+        pz = np.float64(oz)
+        ix = 1.0 / np.float64(dx)
+        iy = 1.0 / np.float64(dy)
+        iz = 1.0 / np.float64(dz)
+        best = float(tmax[i])
+        best_id = -1
+        nvis = 0
+        leaves = 0
+        tests = 0
+        sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
+        sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
+        sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
+        # robust miss test against the padded root box (finite t-range for tol)
+        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, np.float64(best))
+        in_box = t0 <= t1
+        if in_box:
+            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            sp = 0
+            node = 0
+            while True:
+                nvis += 1
+                base = np.uintp(8 * node)
+                cnt = ni[base + seven]
+                if cnt > 0:
+                    leaves += 1
+                    off = ni[base + six]
+                    done = False
+                    for rr in range(off, off + cnt):
+                        r = np.uintp(rr)
+                        tests += 1
+                        t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                                         tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
+                                         tmin, best)
+                        if t < best:
+                            best = t
+                            best_id = ids[r]
+                            if anyhit:
+                                done = True
+                                break
+                    if done:
+                        break
+                    node = -1
                 else:
-                    sn[sp] = left
-                    st[sp] = ln
-                    node = right
-                sp += 1
-            elif hl:
-                node = left
-            elif hr:
-                node = right
-            else:
-                node = -1
-        if node < 0:
-            while sp > 0:
-                sp -= 1
-                if st[sp] <= best + tol:
-                    node = sn[sp]
-                    break
-            if node < 0:
-                break
-    if best_id < 0:
-        best = INF
-    return best, best_id, 1, leaves, tests, nvis
+                    left = node + 1
+                    right = ni[base + six]
+                    lim = best + tol
+                    ln, lf = _box(nf, base + np.uintp(8), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, lim)
+                    rn, rf = _box(nf, np.uintp(8 * right), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, lim)
+                    hl = ln <= lf + tol
+                    hr = rn <= rf + tol
+                    if hl and hr:
+                        spu = np.uintp(sp)
+                        near_left = ln <= rn
+                        sn[spu] = right if near_left else left
+                        st[spu] = rn if near_left else ln
+                        sp += 1
+                        node = left if near_left else right
+                    elif hl:
+                        node = left
+                    elif hr:
+                        node = right
+                    else:
+                        node = -1
+                if node < 0:  # pop the nearest pending node that may still hold a closer hit
+                    while sp > 0:
+                        sp -= 1
+                        spu = np.uintp(sp)
+                        if st[spu] <= best + tol:
+                            node = sn[spu]
+                            break
+                    if node < 0:
+                        break
+        out_t[i] = best if best_id >= 0 else INF
+        out_id[i] = best_id
+        if counters is not None:
+            counters[i, 0] = 1 if in_box else 0
+            counters[i, 1] = leaves
+            counters[i, 2] = tests
+            counters[i, 3] = nvis
 
 
 @pjit
-def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, B, info, tv, ids, stack_size, out_t, out_id, counters):
+def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size, out_t, out_id,
+              counters):
     """Batched BVH traversal, ``prange`` over chunks of CHUNK rays (one stack per chunk);
     ``counters`` (m, 5) int32 or None (the variant without counting)."""
     m = O.shape[0]
     nchunks = (m + CHUNK - 1) // CHUNK
     for ch in prange(nchunks):
-        sn = np.empty(stack_size, np.int64)
-        st = np.empty(stack_size, np.float64)
-        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, stp, te, nv = bvh_ray(
-                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
-                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
-                box, diag, B, info, tv, ids, sn, st)
-            out_t[i] = t
-            out_id[i] = tid
-            if counters is not None:
-                counters[i, 0] = su
-                counters[i, 1] = stp
-                counters[i, 2] = te
-                counters[i, 3] = nv
+        bvh_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, box, diag, ni, nf,
+                  tv, ids, stack_size, out_t, out_id, counters)
 
 
 class BVH(Accel):
@@ -341,8 +357,8 @@ class BVH(Accel):
         tris = scene.tris
         self.n_ = n
         if n == 0:
-            self.bounds_ = np.array([[np.inf] * 3 + [-np.inf] * 3], np.float32)
-            self.info_ = np.zeros((1, 2), np.int32)
+            self.nodes_ = np.zeros((1, 8), np.int32)
+            self.nodes_f_ = self.nodes_.view(np.float32)
             self.tri_ids_ = np.zeros(0, np.int32)
             self.tri_verts_ = np.zeros((0, 9), np.float32)
             self.leaves_, self.depth_, self.sah_ = 0, 0, {"exp_inner": 0.0, "exp_tests": 0.0}
@@ -352,8 +368,11 @@ class BVH(Accel):
         pc = 0.5 * (pb[:, :3].astype(np.float64) + pb[:, 3:].astype(np.float64))
         B, info, order, nleaves, depth, s_inner, s_tests, root_area = bvh_build(
             pb, pc, int(self.bins), int(self.max_leaf), float(self.trav_cost))
-        self.bounds_ = B
-        self.info_ = info
+        nodes = np.empty((len(B), 8), np.int32)
+        nodes[:, :6] = B.view(np.int32)
+        nodes[:, 6:] = info
+        self.nodes_ = nodes
+        self.nodes_f_ = nodes.view(np.float32)
         self.tri_ids_ = order
         self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[order])
         self.build_seconds_ = time.perf_counter() - t_start
@@ -374,12 +393,13 @@ class BVH(Accel):
             out_t[:] = np.inf
             out_id[:] = -1
             return out_t, out_id, cnt
-        bvh_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.bounds_, self.info_, self.tri_verts_,
-                  self.tri_ids_, self.depth_ + 2, out_t, out_id, cnt)
+        bvh_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
+                  self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
+                  out_t, out_id, cnt)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
-        nn = len(self.info_)
+        nn = len(self.nodes_)
         e = self.sah_
         return {
             "structure": "bvh", "nodes": nn, "interior": nn - self.leaves_, "leaves": self.leaves_,
@@ -388,7 +408,7 @@ class BVH(Accel):
             # expected interior nodes / triangle tests per ray meeting the root box (area ratios)
             "exp_inner": e["exp_inner"], "exp_tests": e["exp_tests"],
             "sah_cost": self.trav_cost * e["exp_inner"] + e["exp_tests"],
-            "memory_bytes": int(self.bounds_.nbytes + self.info_.nbytes + self.tri_ids_.nbytes
+            "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes
                                 + self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost},

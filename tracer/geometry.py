@@ -29,25 +29,25 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
     """Ray/triangle test (Moeller-Trumbore by Cramer's rule in the geometric-normal form Embree uses).
     Returns t in (tmin, tmax) or inf for a miss.
 
-    Solves o + t d = a + u (b - a) + v (c - a). All arithmetic is float64 (float32 inputs widen
-    exactly); no back-face culling; edges inclusive (u, v >= 0, u + v <= 1, compared as u det, v det against det); degenerate triangles
+    Solves o + t d = a + u (b - a) + v (c - a). All arithmetic is float64: inputs are widened with
+    ``np.float64`` (in Numba ``float(x)`` keeps a float32 a float32); the widening is exact; no back-face culling; edges inclusive (u, v >= 0, u + v <= 1, compared as u det, v det against det); degenerate triangles
     and rays within PARALLEL_COS of the triangle's plane never hit.
     """
-    e1x = float(bx) - float(ax)
-    e1y = float(by) - float(ay)
-    e1z = float(bz) - float(az)
-    e2x = float(cx) - float(ax)
-    e2y = float(cy) - float(ay)
-    e2z = float(cz) - float(az)
+    e1x = np.float64(bx) - np.float64(ax)
+    e1y = np.float64(by) - np.float64(ay)
+    e1z = np.float64(bz) - np.float64(az)
+    e2x = np.float64(cx) - np.float64(ax)
+    e2y = np.float64(cy) - np.float64(ay)
+    e2z = np.float64(cz) - np.float64(az)
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
     det = dx * nx + dy * ny + dz * nz
     if det * det <= _PAR2 * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy + dz * dz):
         return INF
-    sx = float(ax) - ox
-    sy = float(ay) - oy
-    sz = float(az) - oz
+    sx = np.float64(ax) - ox
+    sy = np.float64(ay) - oy
+    sz = np.float64(az) - oz
     rx = dy * sz - dz * sy
     ry = dz * sx - dx * sz
     rz = dx * sy - dy * sx

@@ -41,7 +41,7 @@ def res_pbrt(bounds, n_tris: int, clamp: bool = True) -> np.ndarray:
     """pbrt-v2 GridAccel: 3 N^(1/3) voxels along the longest axis (clamped at 64), cubical voxels."""
     ext = np.asarray(bounds[1], float) - np.asarray(bounds[0], float)
     per_unit = PBRT_GRID_VOXELS_PER_CUBE_ROOT * n_tris ** (1.0 / 3.0) / ext.max()
-    res = np.maximum(1, np.floor(ext * per_unit)).astype(np.int64)
+    res = np.maximum(1, np.floor(ext * per_unit + 0.5)).astype(np.int64)  # pbrt's Round2Int
     return np.minimum(res, PBRT_GRID_MAX_VOXELS) if clamp else res
 
 
@@ -80,9 +80,9 @@ def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
     cursor = np.zeros(nx * ny * nz, dtype=np.int64) if fill else np.zeros(0, dtype=np.int64)
     refs = 0
     for t in range(tris.shape[0]):
-        ax = float(tris[t, 0, 0]); ay = float(tris[t, 0, 1]); az = float(tris[t, 0, 2])
-        bx = float(tris[t, 1, 0]); by = float(tris[t, 1, 1]); bz = float(tris[t, 1, 2])
-        cx = float(tris[t, 2, 0]); cy = float(tris[t, 2, 1]); cz = float(tris[t, 2, 2])
+        ax = np.float64(tris[t, 0, 0]); ay = np.float64(tris[t, 0, 1]); az = np.float64(tris[t, 0, 2])
+        bx = np.float64(tris[t, 1, 0]); by = np.float64(tris[t, 1, 1]); bz = np.float64(tris[t, 1, 2])
+        cx = np.float64(tris[t, 2, 0]); cy = np.float64(tris[t, 2, 1]); cz = np.float64(tris[t, 2, 2])
         x0, x1 = _cell_range(min(ax, bx, cx), max(ax, bx, cx), gp[0], gp[6], nx)
         y0, y1 = _cell_range(min(ay, by, cy), max(ay, by, cy), gp[1], gp[7], ny)
         z0, z1 = _cell_range(min(az, bz, cz), max(az, bz, cz), gp[2], gp[8], nz)
@@ -134,7 +134,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
     if mb is not None:
         for h in range(MAILBOX):
             mb[chunk, h] = -1
-    best = float(tmax)
+    best = np.float64(tmax)
     best_id = -1
     steps = 0
     tests = 0
@@ -227,8 +227,8 @@ def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv
     for ch in prange(nchunks):
         for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
             t, tid, su, st, te, sk, ju = grid_ray(
-                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
-                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+                np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
                 gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch, macro, mshift)
             out_t[i] = t
             out_id[i] = tid

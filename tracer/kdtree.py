@@ -18,19 +18,23 @@ node: O(N log^2 N), same trees). Per node, exactly as pbrt-v2:
   go above (straddlers, and triangles lying in the plane, go to one or both sides so that every
   triangle is on each side it touches). Triangles are not clipped: edges are their full bounds.
 
-Layout: ``nodes_`` (nodes, 2) int32, depth-first with the below child at ``i + 1`` (pbrt):
-interior ``[axis | above_child << 2, split bits (float32)]``, leaf ``[3 | count << 2, offset]``;
-``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's
-triangle indices in leaf order and ``tri_verts_`` (refs, 9) float32 the triangles copied in that
-order.
+Layout: pbrt's depth-first order with the below child at ``i + 1``, minus the empty leaves (a
+third of pbrt's leaves; they are counted as visited, not stored). ``nodes_`` (stored nodes, 2)
+int32: interior ``[axis | flag << 2 | child << 4, split (float32 bits)]`` with flag 0: below at
+``i + 1``, above at ``child``; 1: below is an empty leaf, above at ``i + 1``; 2: above is an empty
+leaf, below at ``i + 1``. Leaf ``[3 | count << 2, offset]``. ``nodes_f_`` is the float32 view of
+the same memory. ``tri_ids_`` (refs) holds the scene's triangle indices in leaf order and
+``tri_verts_`` (refs, 9) float32 the triangles copied in that order.
 
 Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
-per chunk of rays), early exit once the closest hit is before the next node's t-range; the
-any-hit variant stops at the first hit. Plane distances are float64 and every comparison of a
-plane or a hit with a node's t-range is widened by ``tol`` (1e-7 of the ray's t scale), so
-rounding can only add node visits, never lose a hit. Counters: ``setups`` 1 per ray meeting the
-root box, ``steps`` leaves visited, ``tests`` triangle tests, ``nodes`` nodes visited
-(interior + leaf).
+per chunk of CHUNK rays), early exit once the closest hit lies before the next node's t-range;
+the any-hit variant (``IntersectP``) stops at the first hit. The near/far choice is branch-free.
+Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
+widened by ``tol`` = T_EPS (2e-6) of the ray's t scale, so rounding can only add node visits,
+never lose a hit — including hits that :func:`tracer.geometry.ray_triangle` accepts just outside
+a triangle (it rounds like float32 arithmetic: Numba's ``float()`` keeps float32 as float32).
+Counters: ``setups`` 1 per ray meeting the root box, ``steps`` leaves visited (empty ones too),
+``tests`` triangle tests, ``nodes`` nodes visited (interior + leaf) — pbrt's visits exactly.
 """
 from __future__ import annotations
 
@@ -45,12 +49,13 @@ from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
 from tracer.errors import GridcostError
-from tracer.geometry import INF, ray_box, ray_triangle
+from tracer.geometry import INF, ray_triangle
 from tracer.memory import check_budget
 
 #: rays per parallel chunk (each chunk owns one todo stack)
 CHUNK = 64
-#: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons
+#: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
+#: float32-level rounding of ray_triangle's barycentric test (hits ~1e-7 outside a triangle)
 T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 LEAF = 3
@@ -304,99 +309,206 @@ def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_c
             nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area)
 
 
-# ---------------------------------------------------------------- traversal
-@jit(inline="always")
-def kd_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids,
-           rs, sn, s0, s1):
-    """Trace one ray (pbrt-v2 KdTreeAccel::Intersect / IntersectP). ``rs`` (9) float64 scratch for
-    the ray (origin, direction, inverse direction by axis), ``sn``/``s0``/``s1`` the todo stack.
-    Returns (t, tri_id, setups, steps, tests, nodes)."""
-    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, box[0], box[1], box[2], box[3], box[4], box[5],
-                     tmin, tmax)
-    if t0 > t1:
-        return INF, -1, 0, 0, 0, 0
-    rs[0] = ox
-    rs[1] = oy
-    rs[2] = oz
-    rs[3] = dx
-    rs[4] = dy
-    rs[5] = dz
-    rs[6] = 1.0 / dx
-    rs[7] = 1.0 / dy
-    rs[8] = 1.0 / dz
-    tol = T_EPS * (max(abs(t0), abs(t1)) + diag / math.sqrt(dx * dx + dy * dy + dz * dz))
-    best = float(tmax)
-    best_id = -1
-    nvis = 0
-    leaves = 0
-    tests = 0
+@jit
+def kd_compact(w0, w1, max_depth):
+    """Re-lay the pbrt tree (``w0``/``w1`` from :func:`kd_build`, split bits in ``w1`` of interior
+    nodes) depth-first without its empty leaves: an interior node with an empty child stores its
+    other child at ``i + 1`` and says which child is empty in two flag bits (see module doc)."""
+    n = w0.shape[0]
+    out = np.empty((n, 2), np.int32)
+    st_old = np.empty(max_depth + 2, np.int64)
+    st_par = np.empty(max_depth + 2, np.int64)
     sp = 0
-    node = 0
-    ntmin = t0
-    ntmax = t1
+    cur = 0
+    k = 0
     while True:
-        if best < ntmin - tol:  # the closest hit lies before this node
-            break
-        nvis += 1
-        w = nodes[node, 0]
-        axis = w & 3
-        if axis != LEAF:
-            split = float(nodes_f[node, 1])
-            o = rs[axis]
-            d = rs[3 + axis]
-            below = node + 1
-            above = w >> 2
-            if d == 0.0:  # parallel to the plane: the side of the origin (both when on it)
-                if o < split:
-                    node = below
-                elif o > split:
-                    node = above
-                else:
-                    sn[sp] = above
-                    s0[sp] = ntmin
-                    s1[sp] = ntmax
-                    sp += 1
-                    node = below
-                continue
-            tp = (split - o) * rs[6 + axis]
-            if d > 0.0:
-                first = below
-                second = above
-            else:
-                first = above
-                second = below
-            if tp - tol > ntmax:
-                node = first
-            elif tp + tol < ntmin:
-                node = second
-            else:
-                sn[sp] = second
-                s0[sp] = max(ntmin, tp - tol)
-                s1[sp] = ntmax
-                sp += 1
-                node = first
-                ntmax = min(ntmax, tp + tol)
-        else:
-            leaves += 1
-            off = nodes[node, 1]
-            for r in range(off, off + (w >> 2)):
-                tests += 1
-                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2], tv[r, 3],
-                                 tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8], tmin, best)
-                if t < best:
-                    best = t
-                    best_id = ids[r]
-                    if anyhit:
-                        return best, best_id, 1, leaves, tests, nvis
+        w = w0[cur]
+        if (w & 3) == LEAF:
+            out[k, 0] = w
+            out[k, 1] = w1[cur]
+            k += 1
             if sp == 0:
                 break
             sp -= 1
-            node = sn[sp]
-            ntmin = s0[sp]
-            ntmax = s1[sp]
-    if best_id < 0:
-        best = INF
-    return best, best_id, 1, leaves, tests, nvis
+            cur = st_old[sp]
+            out[st_par[sp], 0] |= k << 4
+            continue
+        b = cur + 1
+        a = w >> 2
+        out[k, 1] = w1[cur]
+        if w0[b] == LEAF:  # below child is an empty leaf (3 | 0 << 2)
+            out[k, 0] = (w & 3) | (1 << 2)
+            cur = a
+        elif w0[a] == LEAF:
+            out[k, 0] = (w & 3) | (2 << 2)
+            cur = b
+        else:
+            out[k, 0] = w & 3
+            st_old[sp] = a
+            st_par[sp] = k
+            sp += 1
+            cur = b
+        k += 1
+    return out[:k].copy()
+
+
+# ---------------------------------------------------------------- traversal
+@jit
+def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+             out_t, out_id, counters):
+    """Trace rays lo..hi-1 (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when ``anyhit``) with one
+    todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array."""
+    rs = np.empty(9, np.float64)  # origin, direction, inverse direction, indexed by axis
+    sn = np.empty(stack_size, np.int64)
+    s0 = np.empty(stack_size, np.float64)
+    s1 = np.empty(stack_size, np.float64)
+    bx0 = box[0]
+    by0 = box[1]
+    bz0 = box[2]
+    bx1 = box[3]
+    by1 = box[4]
+    bz1 = box[5]
+    one = np.uintp(1)
+    for i in range(lo, hi):
+        # the ray exactly as the oracle passes it to ray_triangle
+        ox = float(O[i, 0])
+        oy = float(O[i, 1])
+        oz = float(O[i, 2])
+        dx = float(D[i, 0])
+        dy = float(D[i, 1])
+        dz = float(D[i, 2])
+        best = float(tmax[i])
+        best_id = -1
+        nvis = 0
+        leaves = 0
+        tests = 0
+        ix = 1.0 / np.float64(dx)
+        iy = 1.0 / np.float64(dy)
+        iz = 1.0 / np.float64(dz)
+        # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
+        t0 = tmin
+        t1 = np.float64(best)
+        a = (bx0 - ox) * ix
+        b = (bx1 - ox) * ix
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+        a = (by0 - oy) * iy
+        b = (by1 - oy) * iy
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+        a = (bz0 - oz) * iz
+        b = (bz1 - oz) * iz
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+        in_box = t0 <= t1
+        if in_box:
+            rs[0] = ox
+            rs[1] = oy
+            rs[2] = oz
+            rs[3] = dx
+            rs[4] = dy
+            rs[5] = dz
+            rs[6] = ix
+            rs[7] = iy
+            rs[8] = iz
+            # diag / max|d_k| >= diag / |d|: the t-length of the scene, conservatively
+            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            sp = 0
+            node = 0
+            ntmin = t0
+            ntmax = t1
+            while True:
+                if best < ntmin - tol:  # the closest hit lies before this node: done
+                    break
+                nvis += 1
+                if node >= 0:
+                    nu = np.uintp(2 * node)
+                    w = nodes[nu]
+                    axis = w & 3
+                    if axis != LEAF:
+                        split = float(nodes_f[nu + one])
+                        au = np.uintp(axis)
+                        o = rs[au]
+                        d = rs[au + np.uintp(3)]
+                        fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
+                        below = -1 if fl == 1 else node + 1
+                        above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
+                        if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
+                            if o < split:
+                                node = below
+                            elif o > split:
+                                node = above
+                            else:
+                                spu = np.uintp(sp)
+                                sn[spu] = above
+                                s0[spu] = ntmin
+                                s1[spu] = ntmax
+                                sp += 1
+                                node = below
+                            continue
+                        tp = (split - o) * rs[au + np.uintp(6)]
+                        neg = d < 0.0
+                        first = above if neg else below
+                        second = below if neg else above
+                        lo_tp = tp - tol
+                        hi_tp = tp + tol
+                        only_first = lo_tp > ntmax
+                        only_second = hi_tp < ntmin
+                        both = not (only_first or only_second)
+                        # branch-free: always write the todo entry, keep it only when both
+                        spu = np.uintp(sp)
+                        sn[spu] = second
+                        s0[spu] = max(ntmin, lo_tp)
+                        s1[spu] = ntmax
+                        sp += 1 if both else 0
+                        node = second if only_second else first
+                        ntmax = min(ntmax, hi_tp) if both else ntmax
+                        continue
+                    leaves += 1
+                    off = nodes[nu + one]
+                    done = False
+                    for rr in range(off, off + (w >> 2)):
+                        r = np.uintp(rr)
+                        tests += 1
+                        t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                                         tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
+                                         tmin, best)
+                        if t < best:
+                            best = t
+                            best_id = ids[r]
+                            if anyhit:
+                                done = True
+                                break
+                    if done:
+                        break
+                else:
+                    leaves += 1  # an empty leaf: visited as pbrt does, but not stored
+                if sp == 0:
+                    break
+                sp -= 1
+                spu = np.uintp(sp)
+                node = sn[spu]
+                ntmin = s0[spu]
+                ntmax = s1[spu]
+        out_t[i] = best if best_id >= 0 else INF
+        out_id[i] = best_id
+        if counters is not None:
+            counters[i, 0] = 1 if in_box else 0
+            counters[i, 1] = leaves
+            counters[i, 2] = tests
+            counters[i, 3] = nvis
 
 
 @pjit
@@ -407,22 +519,8 @@ def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack
     m = O.shape[0]
     nchunks = (m + CHUNK - 1) // CHUNK
     for ch in prange(nchunks):
-        rs = np.empty(9, np.float64)
-        sn = np.empty(stack_size, np.int64)
-        s0 = np.empty(stack_size, np.float64)
-        s1 = np.empty(stack_size, np.float64)
-        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, st, te, nv = kd_ray(
-                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
-                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
-                box, diag, nodes, nodes_f, tv, ids, rs, sn, s0, s1)
-            out_t[i] = t
-            out_id[i] = tid
-            if counters is not None:
-                counters[i, 0] = su
-                counters[i, 1] = st
-                counters[i, 2] = te
-                counters[i, 3] = nv
+        kd_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, box, diag, nodes,
+                 nodes_f, tv, ids, stack_size, out_t, out_id, counters)
 
 
 def root_box(scene) -> np.ndarray:
@@ -476,12 +574,14 @@ class KdTree(Accel):
             wt, wc, n, rootb, depth, int(self.max_prims), float(self.isect_cost),
             float(self.trav_cost), float(self.empty_bonus))
         del wt, wc
-        nodes = np.empty((len(w0), 2), np.int32)
-        nodes[:, 0] = w0
         inner = (w0 & 3) != LEAF
-        nodes[:, 1] = np.where(inner, spl.view(np.int32), w1)
+        w1 = np.where(inner, spl.view(np.int32), w1).astype(np.int32)
+        nodes = kd_compact(w0, w1, depth)
+        if len(nodes) >= 2**27:
+            raise GridcostError(f"a kd-tree of {len(nodes):,} nodes exceeds the 27-bit child index")
         self.nodes_ = nodes
         self.nodes_f_ = nodes.view(np.float32)
+        self.logical_nodes_ = len(w0)
         self.tri_ids_ = leaf_ids
         self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[leaf_ids])
         self.box_ = root_box(scene) if n else np.zeros(6)
@@ -503,17 +603,19 @@ class KdTree(Accel):
             out_t[:] = np.inf
             out_id[:] = -1
             return out_t, out_id, cnt
-        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_, self.nodes_f_,
-                 self.tri_verts_, self.tri_ids_, self.depth_ + 2, out_t, out_id, cnt)
+        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
+                 self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
+                 out_t, out_id, cnt)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
-        nn = len(self.nodes_)
+        nn = self.logical_nodes_
         refs = len(self.tri_ids_)
         e = self.sah_
         return {
             "structure": "kdtree", "nodes": nn, "interior": nn - self.leaves_, "leaves": self.leaves_,
-            "empty_leaves": self.empty_leaves_, "depth": self.depth_, "max_depth": self.max_depth_,
+            "empty_leaves": self.empty_leaves_, "stored_nodes": len(self.nodes_),
+            "depth": self.depth_, "max_depth": self.max_depth_,
             "refs": refs, "refs_per_tri": refs / max(self.n_, 1),
             "mean_leaf_refs": refs / max(self.leaves_ - self.empty_leaves_, 1),
             # Havran-style expectations for a ray meeting the root box (surface-area ratios)

@@ -116,7 +116,7 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
     nodes = 0
     if lvl is not None:
         lvl[ray, 0, 0] += 1
-    best = float(tmax)
+    best = np.float64(tmax)
     best_id = -1
     while True:
         c = np.uintp(off + ix + nx * (iy + ny * iz))
@@ -228,8 +228,8 @@ def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
         stf = np.empty((levels, 7), np.float64)
         for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
             t, tid, su, st, te, no = nested_ray(
-                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
-                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+                np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
                 GF, GI, cells, tri_ids, tv, sti, stf, lvl, i)
             out_t[i] = t
             out_id[i] = tid

@@ -17,9 +17,9 @@ from tracer.geometry import INF, ray_triangle
 def _oracle(O, D, tmin, tmax, V, out_t, out_id, out_ties):
     n = V.shape[0]
     for i in prange(O.shape[0]):
-        ox = float(O[i, 0]); oy = float(O[i, 1]); oz = float(O[i, 2])
-        dx = float(D[i, 0]); dy = float(D[i, 1]); dz = float(D[i, 2])
-        best = float(tmax[i])
+        ox = np.float64(O[i, 0]); oy = np.float64(O[i, 1]); oz = np.float64(O[i, 2])
+        dx = np.float64(D[i, 0]); dy = np.float64(D[i, 1]); dz = np.float64(D[i, 2])
+        best = np.float64(tmax[i])
         best_id = -1
         for k in range(n):
             t = ray_triangle(ox, oy, oz, dx, dy, dz, V[k, 0], V[k, 1], V[k, 2], V[k, 3], V[k, 4],

@@ -26,7 +26,7 @@ FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
 FLAT_PAD = 1e-3
 #: every side of the bounds is pushed out by this fraction of the largest extent
 BOUNDS_PAD = 1e-5
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 
 @dataclass
@@ -125,13 +125,42 @@ def _ply_strips(mesh) -> list | None:
     return None
 
 
+_OBJ_REL = re.compile(rb"^\s*f\s.*(?:^|\s)-\d", re.M)
+
+
+def _obj_relative(data: bytes):
+    """Vertices and fan-triangulated faces of an OBJ that uses relative indices (``f -4 -3 -2 -1``),
+    each resolved at its own line. trimesh 5 resolves them against the final vertex count (or fails
+    on interleaved v/f blocks), which scrambles such files, so they are read here (v and f only)."""
+    verts, faces = [], []
+    for line in data.splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == b"v":
+            verts.append([float(x) for x in parts[1:4]])
+        elif parts[0] == b"f":
+            idx = []
+            for ref in parts[1:]:
+                i = int(ref.split(b"/")[0])
+                idx.append(len(verts) + i if i < 0 else i - 1)
+            faces += [(idx[0], idx[k], idx[k + 1]) for k in range(1, len(idx) - 1)]
+    return np.asarray(verts, np.float64).reshape(-1, 3), np.asarray(faces, np.int64).reshape(-1, 3)
+
+
 def _read(path: Path):
     import trimesh
     logging.getLogger("trimesh").setLevel(logging.ERROR)
     kwargs = {"process": False}
-    if path.suffix.lower() in (".obj", ".ply"):
+    suffix = path.suffix.lower()
+    if suffix in (".obj", ".ply"):
         kwargs["skip_materials"] = True  # geometry never needs textures (and Pillow may be absent)
     try:
+        if suffix == ".obj":
+            data = path.read_bytes()
+            if _OBJ_REL.search(data):
+                v, f = _obj_relative(data)
+                return trimesh.Trimesh(vertices=v, faces=f, process=False)
         loaded = trimesh.load(str(path), **kwargs)
     except Exception as exc:  # trimesh raises many types for malformed files
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -139,6 +168,9 @@ def _read(path: Path):
     if isinstance(loaded, trimesh.Scene):
         geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)] if loaded.geometry else []
         loaded = trimesh.util.concatenate(geoms) if geoms else trimesh.Trimesh()
+    if isinstance(loaded, trimesh.PointCloud):  # no faces element: keep vertices and PLY elements (strips)
+        loaded = trimesh.Trimesh(vertices=np.asarray(loaded.vertices), faces=np.zeros((0, 3), np.int64),
+                                 metadata=dict(loaded.metadata), process=False)
     if not isinstance(loaded, trimesh.Trimesh):
         raise GridcostError(f"{path}: holds no triangle mesh (trimesh loaded a {type(loaded).__name__})")
     return loaded

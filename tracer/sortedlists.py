@@ -1,0 +1,592 @@
+"""Fournier & Poulin (1993): a ray tracing accelerator based on a hierarchy of 1D sorted lists.
+
+Every object (triangle) and every bounding volume (BV) is an axis-aligned box; for each BV the
+lo/hi coordinates of its children's boxes are *events*, pre-sorted once per axis. A ray walks
+the events in ray order on all three axes at once (the smallest next Delta-t first); an event
+is IN or OUT depending on the sign of the direction. A child becomes *active* when it has been
+entered on all three axes before it is exited on any (per-child counts 0..3, -1 = processed):
+a triangle is then tested, a BV *opened*. The walk stops when the next event lies past the
+closest hit (or at the first hit for shadow rays).
+
+Hierarchy (Sec. "Building a hierarchy"): top down, a node holding more than ``leaf_size``
+objects lays a regular ``branching`` grid over its objects' box centroids and groups the objects
+by the cell of their centroid; each non-empty cell of two or more objects becomes a child BV
+bounded by its objects (BVs may overlap, objects are never split or duplicated), a lone object
+stays a direct child. Up to ``leaf_size`` objects larger than ``big`` times the node's extent are
+kept as direct children of the node (the paper's "special grid element"). ``hierarchy=False``
+gives the flat method of the paper's Table 1 (one node, all triangles its children).
+
+Hierarchical traversal (Sec. "Traversing a hierarchy"): opening a BV at Delta-t ``t`` walks its
+three lists up to ``t`` (events before it are treated without intersecting anything; children
+found IN on all axes are activated at ``t``) and puts the three next events of the BV in the
+*list of next events*: here one binary heap keyed by (Delta-t, IN before OUT) holding one cursor
+per (open BV, axis). Closing a BV (its OUT event) drops its cursors lazily, when they surface.
+
+Layout (flat arrays): nodes in breadth-first order, node 0 the root; node ``p``'s children are
+the *slots* ``child_start_[p] .. child_start_[p+1]``, a slot being a triangle (``slot_tri_ >= 0``,
+vertices in ``tri_verts_[slot]``) or a BV (``slot_node_``). Node ``p``'s events on axis ``k`` are
+``ev_val_[k, 2 cs[p] : 2 cs[p+1]]`` (float32, sorted, lo before hi at equal values) and
+``ev_code_`` (2 slot + is_hi). Per-chunk scratch: child states (int8 per slot), cursors, heap.
+
+Robustness: object boxes are padded outwards (``PAD_REL`` of the scene extent plus a few float32
+ulps) so that a hit found by :func:`tracer.geometry.ray_triangle` lies strictly inside its box
+even after rounding of Delta-t; boxes are inclusive (IN events before OUT events at equal
+Delta-t); a zero direction component makes that axis static (IN where the slab holds the origin).
+
+Counters: ``setups`` 1 per ray, ``steps`` events treated (also those walked while opening a BV),
+``tests`` ray-triangle tests, ``nodes`` BVs opened (the root included), ``skips`` events of
+children already processed (a subset of ``steps``).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numba import prange
+
+from tracer._jit import jit, pjit
+from tracer.accel import COUNTER_NAMES, Accel
+from tracer.errors import GridcostError
+from tracer.geometry import INF, ray_triangle
+from tracer.memory import check_budget
+
+#: rays per parallel chunk (each chunk owns one set of scratch buffers)
+CHUNK = 64
+#: object boxes are padded by this fraction of the largest scene extent ...
+PAD_REL = 1e-6
+#: ... plus this fraction of the coordinate's magnitude (a few float32 ulps)
+PAD_ULP = 4.0e-7
+NCOUNT = len(COUNTER_NAMES)
+
+
+# ---------------------------------------------------------------- build
+@jit
+def _node_bounds(tb, perm, s, e):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    clo = np.full(3, np.inf)
+    chi = np.full(3, -np.inf)
+    for i in range(s, e):
+        t = perm[i]
+        for k in range(3):
+            a = float(tb[t, k])
+            b = float(tb[t, 3 + k])
+            lo[k] = min(lo[k], a)
+            hi[k] = max(hi[k], b)
+            c = 0.5 * (a + b)
+            clo[k] = min(clo[k], c)
+            chi[k] = max(chi[k], c)
+    return lo, hi, clo, chi
+
+
+@jit
+def build_hierarchy(tb, leaf_size, bx, by, bz, big, flat):
+    """Top-down grid-of-centroids hierarchy over object boxes ``tb`` (N, 6) float32.
+
+    Returns (child_start (B + 1), slot_tri (S), slot_node (S), node_slot (B), node_depth (B)),
+    nodes in breadth-first order (a node's children have larger ids), S = N + B - 1 slots."""
+    n = tb.shape[0]
+    cap_b = max(1, n)
+    cs = np.zeros(cap_b + 1, np.int64)
+    slot_tri = np.full(n + cap_b, -1, np.int32)
+    slot_node = np.full(n + cap_b, -1, np.int32)
+    node_slot = np.full(cap_b, -1, np.int32)
+    depth = np.zeros(cap_b, np.int32)
+    q_s = np.empty(cap_b, np.int64)
+    q_e = np.empty(cap_b, np.int64)
+    perm = np.arange(n).astype(np.int64)
+    tmp = np.empty(n, np.int64)
+    cell = np.empty(n, np.int64)
+    ncell_max = bx * by * bz
+    cnt = np.zeros(ncell_max + 1, np.int64)
+    q_s[0] = 0
+    q_e[0] = n
+    nn = 1
+    nslot = 0
+    p = 0
+    while p < nn:
+        s = q_s[p]
+        e = q_e[p]
+        cs[p] = nslot
+        m = e - s
+        if flat or m <= leaf_size:
+            for i in range(s, e):
+                slot_tri[nslot] = perm[i]
+                nslot += 1
+            p += 1
+            continue
+        lo, hi, clo, chi = _node_bounds(tb, perm, s, e)
+        # the "special grid element": a few objects spanning a large part of the node
+        r = s
+        if big > 0.0:
+            ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+            nb = 0
+            for i in range(s, e):
+                t = perm[i]
+                oe = max(tb[t, 3] - tb[t, 0], tb[t, 4] - tb[t, 1], tb[t, 5] - tb[t, 2])
+                if oe > big * ext:
+                    nb += 1
+            if 0 < nb <= leaf_size and nb < m:
+                w = s
+                u = 0
+                for i in range(s, e):
+                    t = perm[i]
+                    oe = max(tb[t, 3] - tb[t, 0], tb[t, 4] - tb[t, 1], tb[t, 5] - tb[t, 2])
+                    if oe > big * ext:
+                        perm[w] = t
+                        w += 1
+                    else:
+                        tmp[u] = t
+                        u += 1
+                for i in range(u):
+                    perm[w + i] = tmp[i]
+                for i in range(s, s + nb):
+                    slot_tri[nslot] = perm[i]
+                    nslot += 1
+                r = s + nb
+                lo, hi, clo, chi = _node_bounds(tb, perm, r, e)
+        rest = e - r
+        nx = bx if chi[0] > clo[0] else 1
+        ny = by if chi[1] > clo[1] else 1
+        nz = bz if chi[2] > clo[2] else 1
+        if rest <= 1 or nx * ny * nz == 1 or (r > s and rest <= leaf_size):
+            if rest >= 2 and r > s:  # the small rest: one child BV beside the big objects
+                slot_node[nslot] = nn
+                node_slot[nn] = nslot
+                depth[nn] = depth[p] + 1
+                q_s[nn] = r
+                q_e[nn] = e
+                nn += 1
+                nslot += 1
+            else:
+                for i in range(r, e):
+                    slot_tri[nslot] = perm[i]
+                    nslot += 1
+            p += 1
+            continue
+        # counting sort of the rest by the grid cell of their centroid
+        nc = nx * ny * nz
+        for c in range(nc + 1):
+            cnt[c] = 0
+        for i in range(r, e):
+            t = perm[i]
+            ci = 0
+            mul = 1
+            for k in range(3):
+                nk = nx if k == 0 else (ny if k == 1 else nz)
+                if nk > 1:
+                    c = 0.5 * (float(tb[t, k]) + float(tb[t, 3 + k]))
+                    j = int((c - clo[k]) / (chi[k] - clo[k]) * nk)
+                    j = min(max(j, 0), nk - 1)
+                    ci += j * mul
+                mul *= nk
+            cell[i] = ci
+            cnt[ci + 1] += 1
+        for c in range(nc):
+            cnt[c + 1] += cnt[c]
+        for i in range(r, e):
+            ci = cell[i]
+            tmp[cnt[ci]] = perm[i]
+            cnt[ci] += 1
+        # cnt[c] is now the end of cell c (relative to r)
+        start = 0
+        for c in range(nc):
+            end = cnt[c]
+            for i in range(start, end):
+                perm[r + i] = tmp[i]
+            k = end - start
+            if k == 1:
+                slot_tri[nslot] = perm[r + start]
+                nslot += 1
+            elif k >= 2:
+                slot_node[nslot] = nn
+                node_slot[nn] = nslot
+                depth[nn] = depth[p] + 1
+                q_s[nn] = r + start
+                q_e[nn] = r + end
+                nn += 1
+                nslot += 1
+            start = end
+        p += 1
+    cs[nn] = nslot
+    return cs[:nn + 1].copy(), slot_tri[:nslot].copy(), slot_node[:nslot].copy(), node_slot[:nn].copy(), depth[:nn].copy()
+
+
+@jit
+def build_events(cs, slot_tri, slot_node, tb):
+    """Node boxes (bottom up) and the sorted per-axis event lists of every node's children."""
+    nb = cs.shape[0] - 1
+    ns = slot_tri.shape[0]
+    nbox = np.empty((nb, 6), np.float32)
+    for p in range(nb - 1, -1, -1):
+        for k in range(3):
+            nbox[p, k] = np.inf
+            nbox[p, 3 + k] = -np.inf
+        for s in range(cs[p], cs[p + 1]):
+            t = slot_tri[s]
+            for k in range(6):
+                v = tb[t, k] if t >= 0 else nbox[slot_node[s], k]
+                if k < 3:
+                    nbox[p, k] = min(nbox[p, k], v)
+                else:
+                    nbox[p, k] = max(nbox[p, k], v)
+    ev_val = np.empty((3, 2 * ns), np.float32)
+    ev_code = np.empty((3, 2 * ns), np.int32)
+    for p in range(nb):
+        a = cs[p]
+        m = cs[p + 1] - a
+        vals = np.empty(2 * m, np.float32)
+        for k in range(3):
+            for i in range(m):
+                s = a + i
+                t = slot_tri[s]
+                if t >= 0:
+                    vals[i] = tb[t, k]
+                    vals[m + i] = tb[t, 3 + k]
+                else:
+                    vals[i] = nbox[slot_node[s], k]
+                    vals[m + i] = nbox[slot_node[s], 3 + k]
+            order = np.argsort(vals, kind="mergesort")  # stable: lo before hi at equal values
+            for j in range(2 * m):
+                o = order[j]
+                ev_val[k, 2 * a + j] = vals[o]
+                ev_code[k, 2 * a + j] = 2 * (a + (o % m)) + (1 if o >= m else 0)
+    return nbox, ev_val, ev_code
+
+
+def padded_boxes(tris: np.ndarray) -> np.ndarray:
+    """(N, 6) float32 [lo xyz, hi xyz] triangle boxes padded outwards (see module docstring)."""
+    v = tris.astype(np.float64)
+    lo = v.min(axis=1)
+    hi = v.max(axis=1)
+    ext = float((hi.max(axis=0) - lo.min(axis=0)).max()) if len(v) else 1.0
+    pad_lo = PAD_REL * max(ext, 1e-30) + PAD_ULP * np.abs(lo)
+    pad_hi = PAD_REL * max(ext, 1e-30) + PAD_ULP * np.abs(hi)
+    return np.concatenate([lo - pad_lo, hi + pad_hi], axis=1).astype(np.float32)
+
+
+# ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def _ev_t(val, hi, o, inv, mode):
+    """Delta-t and IN-ness of an event. mode 0: d > 0 (lo = IN), 1: d < 0 (hi = IN), 2: d == 0:
+    a static axis, where IN (lo <= o) and OUT (hi < o) events are all at -inf, the others at +inf."""
+    if mode == 2:
+        if hi == 0:
+            return (-INF if float(val) <= o else INF), True
+        return (-INF if float(val) < o else INF), False
+    return (float(val) - o) * inv, hi == mode
+
+
+@jit(inline="always")
+def _less(c_t, c_in, a, b):
+    ta = c_t[a]
+    tb = c_t[b]
+    return ta < tb or (ta == tb and c_in[a] > c_in[b])
+
+
+@jit
+def _sift_up(hp, c_t, c_in, i):
+    c = hp[i]
+    while i > 0:
+        p = (i - 1) >> 1
+        q = hp[p]
+        if _less(c_t, c_in, c, q):
+            hp[i] = q
+            i = p
+        else:
+            break
+    hp[i] = c
+
+
+@jit
+def _sift_down(hp, n, c_t, c_in, i):
+    c = hp[i]
+    while True:
+        m = 2 * i + 1
+        if m >= n:
+            break
+        if m + 1 < n and _less(c_t, c_in, hp[m + 1], hp[m]):
+            m += 1
+        if _less(c_t, c_in, hp[m], c):
+            hp[i] = hp[m]
+            i = m
+        else:
+            break
+    hp[i] = c
+
+
+@jit
+def _open(p, t_open, cs, ev_val, ev_code, st, org, inv, mode, hp, hn, nc, c_pos, c_end, c_node, c_ax,
+          c_t, c_in, pend, npend):
+    """Open node ``p`` at Delta-t ``t_open``: reset its children's states, treat the events before
+    ``t_open`` on each axis (children IN everywhere go to ``pend``), push one cursor per axis.
+    Returns (hn, nc, npend, steps, skips)."""
+    a = cs[p]
+    b = cs[p + 1]
+    for s in range(a, b):
+        st[s] = 0
+    steps = 0
+    skips = 0
+    for k in range(3):
+        md = mode[k]
+        if md == 1:
+            pos = 2 * b - 1
+            end = 2 * a - 1
+            step = -1
+        else:
+            pos = 2 * a
+            end = 2 * b
+            step = 1
+        o = org[k]
+        iv = inv[k]
+        t = INF
+        isin = False
+        while pos != end:
+            code = ev_code[k, pos]
+            t, isin = _ev_t(ev_val[k, pos], code & 1, o, iv, md)
+            if t < t_open or (t == t_open and isin):
+                steps += 1
+                s = code >> 1
+                v = st[s]
+                if v < 0:
+                    skips += 1
+                elif isin:
+                    v += 1
+                    st[s] = v
+                    if v == 3:
+                        pend[npend] = s
+                        npend += 1
+                else:
+                    st[s] = -1
+                pos += step
+            else:
+                break
+        if pos != end and t < INF:
+            c = nc
+            nc += 1
+            c_pos[c] = pos
+            c_end[c] = end
+            c_node[c] = p
+            c_ax[c] = k
+            c_t[c] = t
+            c_in[c] = 1 if isin else 0
+            hp[hn] = c
+            hn += 1
+            _sift_up(hp, c_t, c_in, hn - 1)
+    return hn, nc, npend, steps, skips
+
+
+@jit
+def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, node_slot, nbox, tv,
+           ev_val, ev_code, st, hp, c_pos, c_end, c_node, c_ax, c_t, c_in, pend, org, inv, mode):
+    """Trace one ray; returns (t, tri_id, setups, steps, tests, nodes, skips)."""
+    org[0] = ox
+    org[1] = oy
+    org[2] = oz
+    t0 = -INF
+    t1 = INF
+    for k in range(3):
+        d = dx if k == 0 else (dy if k == 1 else dz)
+        if d > 0.0:
+            mode[k] = 0
+            inv[k] = 1.0 / d
+        elif d < 0.0:
+            mode[k] = 1
+            inv[k] = 1.0 / d
+        else:
+            mode[k] = 2
+            inv[k] = 0.0
+        md = mode[k]
+        if md == 1:  # the root box's IN and OUT events on this axis
+            ta, _ = _ev_t(nbox[0, 3 + k], 1, org[k], inv[k], md)
+            tb, _ = _ev_t(nbox[0, k], 0, org[k], inv[k], md)
+        else:
+            ta, _ = _ev_t(nbox[0, k], 0, org[k], inv[k], md)
+            tb, _ = _ev_t(nbox[0, 3 + k], 1, org[k], inv[k], md)
+        t0 = max(t0, ta)
+        t1 = min(t1, tb)
+    if t0 > t1 or t1 < tmin or t0 > tmax:
+        return INF, -1, 1, 0, 0, 0, 0
+    best = float(tmax)
+    best_id = -1
+    tcur = max(t0, tmin)
+    hn, nc, npend, steps, skips = _open(0, tcur, cs, ev_val, ev_code, st, org, inv, mode, hp, 0, 0, c_pos,
+                                        c_end, c_node, c_ax, c_t, c_in, pend, 0)
+    tests = 0
+    nodes = 1
+    while True:
+        # activate the children that became IN on all axes at tcur
+        while npend > 0:
+            npend -= 1
+            s = pend[npend]
+            if st[s] != 3:
+                continue
+            q = slot_node[s]
+            if q < 0:
+                tests += 1
+                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[s, 0], tv[s, 1], tv[s, 2], tv[s, 3], tv[s, 4],
+                                 tv[s, 5], tv[s, 6], tv[s, 7], tv[s, 8], tmin, best)
+                if t < best:
+                    best = t
+                    best_id = slot_tri[s]
+                    if anyhit:
+                        return best, best_id, 1, steps, tests, nodes, skips
+            else:
+                nodes += 1
+                hn, nc, npend, a, b = _open(q, tcur, cs, ev_val, ev_code, st, org, inv, mode, hp, hn, nc,
+                                            c_pos, c_end, c_node, c_ax, c_t, c_in, pend, npend)
+                steps += a
+                skips += b
+        if hn == 0:
+            break
+        c = hp[0]
+        t = c_t[c]
+        if t > best:
+            break
+        p = c_node[c]
+        k = c_ax[c]
+        md = mode[k]
+        if p == 0 or st[node_slot[p]] >= 0:  # a cursor of a BV still open: treat its event
+            pos = c_pos[c]
+            s = ev_code[k, pos] >> 1
+            steps += 1
+            v = st[s]
+            if v < 0:
+                skips += 1
+            elif c_in[c] == 1:
+                v += 1
+                st[s] = v
+                if v == 3:
+                    pend[npend] = s
+                    npend += 1
+            else:
+                st[s] = -1
+            tcur = t
+            pos += -1 if md == 1 else 1
+            if pos != c_end[c]:
+                code = ev_code[k, pos]
+                t2, in2 = _ev_t(ev_val[k, pos], code & 1, org[k], inv[k], md)
+                c_pos[c] = pos
+                c_t[c] = t2
+                c_in[c] = 1 if in2 else 0
+                _sift_down(hp, hn, c_t, c_in, 0)
+                continue
+        # cursor exhausted, or its BV closed: drop it
+        hn -= 1
+        if hn > 0:
+            hp[0] = hp[hn]
+            _sift_down(hp, hn, c_t, c_in, 0)
+    if best_id < 0:
+        best = INF
+    return best, best_id, 1, steps, tests, nodes, skips
+
+
+@pjit
+def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, node_slot, nbox, tv, ev_val, ev_code,
+             out_t, out_id, counters):
+    """Batched traversal, ``prange`` over chunks of CHUNK rays, one set of scratch buffers per chunk;
+    ``counters`` (m, 5) int32 or None (the variant without counting)."""
+    m = O.shape[0]
+    nchunks = (m + CHUNK - 1) // CHUNK
+    ns = slot_tri.shape[0]
+    ncur = 3 * (cs.shape[0] - 1)
+    for ch in prange(nchunks):
+        st = np.empty(ns, np.int8)
+        pend = np.empty(ns + 1, np.int32)
+        hp = np.empty(ncur, np.int32)
+        c_pos = np.empty(ncur, np.int64)
+        c_end = np.empty(ncur, np.int64)
+        c_node = np.empty(ncur, np.int32)
+        c_ax = np.empty(ncur, np.int8)
+        c_t = np.empty(ncur, np.float64)
+        c_in = np.empty(ncur, np.int8)
+        org = np.empty(3, np.float64)
+        inv = np.empty(3, np.float64)
+        mode = np.empty(3, np.int8)
+        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
+            t, tid, su, stp, te, nv, sk = sl_ray(
+                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
+                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
+                cs, slot_tri, slot_node, node_slot, nbox, tv, ev_val, ev_code,
+                st, hp, c_pos, c_end, c_node, c_ax, c_t, c_in, pend, org, inv, mode)
+            out_t[i] = t
+            out_id[i] = tid
+            if counters is not None:
+                counters[i, 0] = su
+                counters[i, 1] = stp
+                counters[i, 2] = te
+                counters[i, 3] = nv
+                counters[i, 4] = sk
+
+
+class SortedLists(Accel):
+    """Fournier & Poulin 1993 sorted event lists. ``hierarchy`` (True) builds the BV hierarchy;
+    ``leaf_size`` (8) objects at most per leaf BV; ``branching`` cells per axis of the grid laid
+    over each node's centroids (int or 3 ints; 2 = up to 8 children); ``big`` (0.5): objects larger
+    than this fraction of their node stay its direct children (0 turns this off)."""
+
+    name = "sortedlists"
+
+    def __init__(self, hierarchy=True, leaf_size=8, branching=2, big=0.5):
+        self.hierarchy, self.leaf_size, self.branching, self.big = hierarchy, leaf_size, branching, big
+
+    def build(self, scene):
+        br = np.broadcast_to(np.asarray(self.branching, np.int64), (3,))
+        if (br < 1).any() or (br > 16).any() or br.prod() < 2:
+            raise GridcostError(f"sorted-lists branching must be 1..16 per axis with at least 2 cells, got {self.branching}")
+        if int(self.leaf_size) < 1:
+            raise GridcostError(f"sorted-lists leaf_size must be >= 1, got {self.leaf_size}")
+        n = scene.n
+        if n >= 2**29:
+            raise GridcostError(f"{n:,} triangles exceed the sorted lists' int32 slot range")
+        check_budget(f"sorted lists over {n:,} triangles of {scene.name}", n * (24 + 2 * 48 + 36 + 64))
+        t_start = time.perf_counter()
+        self.n_ = n
+        tb = padded_boxes(scene.tris)
+        if n == 0:
+            tb = np.zeros((0, 6), np.float32)
+        cs, slot_tri, slot_node, node_slot, depth = build_hierarchy(
+            tb, int(self.leaf_size), int(br[0]), int(br[1]), int(br[2]), float(self.big or 0.0),
+            not self.hierarchy)
+        nbox, ev_val, ev_code = build_events(cs, slot_tri, slot_node, tb)
+        tv = np.zeros((len(slot_tri), 9), np.float32)
+        is_tri = slot_tri >= 0
+        tv[is_tri] = scene.tris.reshape(-1, 9)[slot_tri[is_tri]]
+        self.child_start_, self.slot_tri_, self.slot_node_, self.node_slot_ = cs, slot_tri, slot_node, node_slot
+        self.node_box_, self.ev_val_, self.ev_code_, self.tri_verts_ = nbox, ev_val, ev_code, tv
+        self.depth_ = depth
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        m = len(o)
+        out_t = np.empty(m, np.float32)
+        out_id = np.empty(m, np.int32)
+        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        if self.n_ == 0:
+            out_t[:] = np.inf
+            out_id[:] = -1
+            if cnt is not None:
+                cnt[:, 0] = 1
+            return out_t, out_id, cnt
+        sl_trace(o, d, tmin, tmax, anyhit, self.child_start_, self.slot_tri_, self.slot_node_, self.node_slot_,
+                 self.node_box_, self.tri_verts_, self.ev_val_, self.ev_code_, out_t, out_id, cnt)
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        cs = self.child_start_
+        nb = len(cs) - 1
+        kids = np.diff(cs)
+        leaf = np.array([not (self.slot_node_[cs[p]:cs[p + 1]] >= 0).any() for p in range(nb)], bool) if nb else np.zeros(0, bool)
+        mem = sum(a.nbytes for a in (cs, self.slot_tri_, self.slot_node_, self.node_slot_, self.node_box_,
+                                     self.ev_val_, self.ev_code_, self.tri_verts_))
+        return {
+            "structure": "sortedlists", "nodes": nb, "leaves": int(leaf.sum()), "slots": int(len(self.slot_tri_)),
+            "events": int(self.ev_val_.shape[1]) * 3, "depth": int(self.depth_.max(initial=0)) + 1,
+            "max_children": int(kids.max(initial=0)), "mean_children": float(kids.mean()) if nb else 0.0,
+            "root_children": int(kids[0]) if nb else 0,
+            "memory_bytes": int(mem), "build_s": self.build_seconds_,
+            "params": {"hierarchy": bool(self.hierarchy), "leaf_size": int(self.leaf_size),
+                       "branching": np.broadcast_to(np.asarray(self.branching), (3,)).tolist(), "big": self.big},
+        }
