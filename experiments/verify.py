@@ -39,8 +39,10 @@ def run_verify(scene, structure: str, params: dict, kinds, n_rays: int, seed: in
 
 
 def main(args) -> int:
-    scene = scene_from_args(args)
     kinds = KINDS if args.kind == "all" else (args.kind,)
+    if args.scene and "," in args.scene:  # several scenes: one line each, a summary file
+        return _many(args, kinds)
+    scene = scene_from_args(args)
     t0 = time.perf_counter()
     out = run_verify(scene, args.structure, parse_params(args.param), kinds, args.rays, args.seed)
     out["seconds"] = time.perf_counter() - t0
@@ -54,3 +56,38 @@ def main(args) -> int:
         print(f"total: {out['rays']:,} rays, {out['disagreements']} disagreements, {out['ties']} ties "
               f"({out['seconds']:.1f} s)")
     return 0 if out["disagreements"] == 0 else 1
+
+
+def _many(args, kinds) -> int:
+    from pathlib import Path
+
+    from experiments.results import atomic_write, write_json
+    from tracer.scene import load_scene
+    outs = []
+    for name in args.scene.split(","):
+        t0 = time.perf_counter()
+        out = run_verify(load_scene(name), args.structure, parse_params(args.param), kinds, args.rays, args.seed)
+        out["seconds"] = time.perf_counter() - t0
+        outs.append(out)
+        if not args.json:
+            print(f"{name:18s} faces {out['faces']:>9,}  rays {out['rays']:>9,}  disagreements {out['disagreements']}  "
+                  f"ties {out['ties']}  ({out['seconds']:.0f} s)", flush=True)
+    total = {"structure": args.structure, "rays": sum(o["rays"] for o in outs),
+             "disagreements": sum(o["disagreements"] for o in outs), "ties": sum(o["ties"] for o in outs),
+             "scenes": outs}
+    d = Path(args.out) / "verify"
+    write_json(d / f"{args.structure}.json", total)
+    lines = [f"# Oracle agreement: {args.structure}", "",
+             f"Every ray traced with `{args.structure}` and with the float64 brute-force oracle; ray kinds: "
+             f"{', '.join(kinds)}; {args.rays:,} rays per kind and scene (seed {args.seed}).", "",
+             "| scene | faces | rays | hits | disagreements | ties |", "|---|---|---|---|---|---|"]
+    lines += [f"| {o['scene']} | {o['faces']:,} | {o['rays']:,} | {o['hits']:,} | {o['disagreements']} | {o['ties']} |"
+              for o in outs]
+    lines += ["", f"Total: {total['rays']:,} rays, {total['disagreements']} disagreements, {total['ties']} ties "
+              "(a different triangle at the same t: duplicate faces, shared edges)."]
+    atomic_write(d / f"summary-{args.structure}.md", "\n".join(lines) + "\n")
+    if args.json:
+        emit_json(total)
+    else:
+        print(f"total: {total['rays']:,} rays, {total['disagreements']} disagreements, {total['ties']} ties")
+    return 0 if total["disagreements"] == 0 else 1
