@@ -9,19 +9,20 @@ best split (cost N); larger nodes are always split (by index halves when all cen
 
 Layout (depth-first, left child implicit at ``i + 1``): ``nodes_`` (nodes, 8) int32 records of
 32 bytes, ``[lo xyz, hi xyz (float32 bits), a, b]`` — interior ``a`` = right child, ``b`` = 0;
-leaf ``a`` = offset, ``b`` = count >= 1 — and ``nodes_f_`` their float32 view; ``tri_ids_`` and ``tri_verts_`` (N, 9) float32 hold the triangles in
-leaf order.
+leaf ``a`` = offset, ``b`` = count >= 1 — and ``nodes_f_`` their float32 view. ``tri_ids_`` and
+``tri_verts_`` (N, 9) float32 hold the triangles in leaf order.
 
 Traversal: at an interior node both child boxes are tested (float64 slab test that treats an
 origin on a slab plane with a zero direction as inside); the nearer hit child is visited first
 and the other pushed with its entry distance on a fixed-size stack (one per chunk of rays), and
 popped entries beyond the closest hit are dropped. Box/hit comparisons are widened by ``tol``
-(1e-7 of the ray's t scale) so rounding never loses a hit. Counters: ``setups`` 1 per ray meeting
-the root box, ``nodes`` nodes visited (entered), ``steps`` leaves visited, ``tests`` triangle tests.
+(T_EPS = 2e-6 of the ray's t scale) so rounding never loses a hit, also not the hits
+:func:`tracer.geometry.ray_triangle` accepts just outside a triangle (float32-level rounding).
+Counters: ``setups`` 1 per ray meeting the root box, ``nodes`` nodes visited (entered), ``steps``
+leaves visited, ``tests`` triangle tests.
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
@@ -36,7 +37,7 @@ from tracer.memory import check_budget
 
 #: rays per parallel chunk (each chunk owns one stack)
 CHUNK = 64
-#: relative widening of box/hit comparisons (of the ray's t scale)
+#: relative widening of box/hit comparisons (of the ray's t scale), as in tracer.kdtree
 T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 #: pbrt-v2 BVHAccel SAH weights: traversal 1/8 of a triangle test
@@ -52,6 +53,11 @@ def _bin_of(c, cmin, scale, nbins):
     if b >= nbins:
         return nbins - 1
     return b
+
+
+@jit(inline="always")
+def _area(x0, x1, x2, X0, X1, X2):
+    return 2.0 * ((X0 - x0) * (X1 - x1) + (X1 - x1) * (X2 - x2) + (X2 - x2) * (X0 - x0))
 
 
 @jit
@@ -135,7 +141,7 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
                     X0 = max(X0, bin_b[a, b, 3]); X1 = max(X1, bin_b[a, b, 4]); X2 = max(X2, bin_b[a, b, 5])
                     acc += bin_n[a, b]
                     r_n[b] = acc
-                    r_area[b] = 2.0 * ((X0 - x0) * (X1 - x1) + (X1 - x1) * (X2 - x2) + (X2 - x2) * (X0 - x0)) if acc else 0.0
+                    r_area[b] = _area(x0, x1, x2, X0, X1, X2) if acc else 0.0
                 x0 = INF; x1 = INF; x2 = INF; X0 = -INF; X1 = -INF; X2 = -INF
                 acc = 0
                 for b in range(nbins - 1):  # split between bin b and b + 1
@@ -144,13 +150,12 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
                     acc += bin_n[a, b]
                     if acc == 0 or r_n[b + 1] == 0:
                         continue
-                    la = 2.0 * ((X0 - x0) * (X1 - x1) + (X1 - x1) * (X2 - x2) + (X2 - x2) * (X0 - x0))
-                    cost = la * acc + r_area[b + 1] * r_n[b + 1]
+                    cost = _area(x0, x1, x2, X0, X1, X2) * acc + r_area[b + 1] * r_n[b + 1]
                     if cost < best_cost:
                         best_cost = cost
                         best_axis = a
                         best_bin = b
-        split_cost = trav_cost + best_cost / area if area > 0 else (trav_cost + cnt if best_axis >= 0 else INF)
+        split_cost = trav_cost + best_cost / area if area > 0 else INF
         if cnt == 1 or (cnt <= max_leaf and (best_axis < 0 or cnt <= split_cost)):
             info[node, 0] = s
             info[node, 1] = cnt

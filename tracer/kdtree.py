@@ -89,16 +89,8 @@ def sorted_edges(lo: np.ndarray, hi: np.ndarray):
 
 
 @jit
-def _grow_i32(a, need):
-    if need <= a.shape[0]:
-        return a
-    b = np.empty(max(need, a.shape[0] * 3 // 2 + 16), a.dtype)
-    b[:a.shape[0]] = a
-    return b
-
-
-@jit
-def _grow_f32(a, need):
+def _grow(a, need):
+    """``a`` itself, or a 1.5x larger copy when it holds fewer than ``need`` entries."""
     if need <= a.shape[0]:
         return a
     b = np.empty(max(need, a.shape[0] * 3 // 2 + 16), a.dtype)
@@ -157,9 +149,9 @@ def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_c
         node = nnodes
         nnodes += 1
         if nnodes > w0.shape[0]:
-            w0 = _grow_i32(w0, nnodes)
-            w1 = _grow_i32(w1, nnodes)
-            spl = _grow_f32(spl, nnodes)
+            w0 = _grow(w0, nnodes)
+            w1 = _grow(w1, nnodes)
+            spl = _grow(spl, nnodes)
         if parent >= 0:
             w0[parent] |= node << 2
         depth_reached = max(depth_reached, max_depth - depth)
@@ -214,7 +206,7 @@ def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_c
                 make_leaf = True
         if make_leaf:
             # leaf: its primitives in the order of their START edges along x
-            leaf_ids = _grow_i32(leaf_ids, nrefs + n)
+            leaf_ids = _grow(leaf_ids, nrefs + n)
             off = nrefs
             for i in range(2 * n):
                 c = ev_c[0, base + i]
@@ -353,6 +345,20 @@ def kd_compact(w0, w1, max_depth):
 
 
 # ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def _slab_clip(lo, hi, o, inv, t0, t1):
+    """Clip [t0, t1] to one slab of the root box (float64; a NaN product is ignored)."""
+    a = (lo - o) * inv
+    b = (hi - o) * inv
+    if a > b:
+        a, b = b, a
+    if a > t0:
+        t0 = a
+    if b < t1:
+        t1 = b
+    return t0, t1
+
+
 @jit
 def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
              out_t, out_id, counters):
@@ -386,32 +392,9 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
         iy = 1.0 / np.float64(dy)
         iz = 1.0 / np.float64(dz)
         # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
-        t0 = tmin
-        t1 = np.float64(best)
-        a = (bx0 - ox) * ix
-        b = (bx1 - ox) * ix
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
-        a = (by0 - oy) * iy
-        b = (by1 - oy) * iy
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
-        a = (bz0 - oz) * iz
-        b = (bz1 - oz) * iz
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
+        t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, np.float64(best))
+        t0, t1 = _slab_clip(by0, by1, oy, iy, t0, t1)
+        t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
         in_box = t0 <= t1
         if in_box:
             rs[0] = ox

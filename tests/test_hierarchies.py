@@ -1,0 +1,218 @@
+"""Tests of the hierarchies (tracer.kdtree: pbrt-v2 SAH kd-tree; tracer.bvh: binned-SAH BVH):
+closest hits identical to the float64 brute-force oracle on every ray kind, any-hit queries,
+counters, the counting/non-counting variants, and small or empty cases."""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from tracer import build
+from tracer.oracle import compare, oracle_intersect
+from tracer.rays import KINDS, make_rays
+from tracer.scene import Scene, load_scene
+
+STRUCTURES = ("kdtree", "bvh")
+SCENES = ("bunny-948", "cornell", "cylinder-196", "particles-2000")
+NRAYS = 5000
+
+
+@lru_cache(maxsize=None)
+def scene(name: str) -> Scene:
+    return load_scene(name)
+
+
+@lru_cache(maxsize=None)
+def accel(structure: str, name: str):
+    return build(scene(name), structure)
+
+
+@lru_cache(maxsize=None)
+def rays(name: str, kind: str):
+    return make_rays(scene(name), kind, NRAYS, seed=7)
+
+
+@lru_cache(maxsize=None)
+def oracle(name: str, kind: str):
+    r = rays(name, kind)
+    return oracle_intersect(scene(name), r.origins, r.directions)
+
+
+@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_closest_hits_match_oracle(structure, name, kind):
+    r = rays(name, kind)
+    hits, cnt = accel(structure, name).intersect(r.origins, r.directions)
+    ref, ties = oracle(name, kind)
+    res = compare(hits, ref, ties)
+    assert res["disagreements"] == 0, res
+    assert res["hits"] > 0
+    # tri ids are the scene's original indices: the hit triangle really is at that t
+    h = hits.tri_id >= 0
+    assert np.array_equal(hits.tri_id >= 0, ref.tri_id >= 0)
+    assert np.all(hits.tri_id[h] < scene(name).n)
+    # counters: one setup per ray meeting the root box, some work done
+    tot = cnt.total()
+    assert set(np.unique(cnt["setups"])) <= {0, 1}
+    assert tot["setups"] > 0 and tot["tests"] > 0 and tot["nodes"] > 0 and tot["steps"] > 0
+    assert np.all(cnt["nodes"] >= cnt["steps"])
+    assert np.all(cnt["setups"][h] == 1)
+
+
+@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_counting_variant_returns_identical_hits(structure, name):
+    for kind in ("random", "adversarial"):
+        r = rays(name, kind)
+        a = accel(structure, name)
+        h1, c1 = a.intersect(r.origins, r.directions, counters=True)
+        h0, c0 = a.intersect(r.origins, r.directions, counters=False)
+        assert c0 is None and c1 is not None
+        assert np.array_equal(h1.tri_id, h0.tri_id)
+        assert np.array_equal(h1.t, h0.t, equal_nan=True)
+
+
+@pytest.mark.parametrize("name", SCENES)
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_occluded_matches_oracle_within_tmax(structure, name):
+    rng = np.random.default_rng(3)
+    for kind in ("random", "path"):
+        r = rays(name, kind)
+        ref, _ = oracle(name, kind)
+        hit = ref.tri_id >= 0
+        ext = float(np.linalg.norm(scene(name).bounds[1] - scene(name).bounds[0]))
+        tmax = np.where(hit, ref.t * rng.uniform(0.5, 1.5, len(hit)), ext * rng.uniform(0.0, 2.0, len(hit)))
+        tmax = tmax.astype(np.float32)
+        want = oracle_intersect(scene(name), r.origins, r.directions, tmax=tmax)[0].tri_id >= 0
+        got = accel(structure, name).occluded(r.origins, r.directions, tmax)
+        assert got.dtype == bool
+        assert np.array_equal(got, want), np.flatnonzero(got != want)[:10]
+        assert 0 < want.sum() < hit.sum()  # the tmax cut really cut some hits
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_tmin_and_tmax_respected(structure):
+    sc = scene("bunny-948")
+    diag = float(np.linalg.norm(sc.bounds[1] - sc.bounds[0]))
+    r = rays("bunny-948", "random")
+    tmin, tmax = 0.45 * diag, 0.6 * diag
+    ref, ties = oracle_intersect(sc, r.origins, r.directions, tmin=tmin, tmax=tmax)
+    hits, _ = accel(structure, "bunny-948").intersect(r.origins, r.directions, tmin=tmin, tmax=tmax)
+    res = compare(hits, ref, ties)
+    assert res["disagreements"] == 0 and res["hits"] > 0, res
+    assert np.all((hits.t[hits.tri_id >= 0] > tmin) & (hits.t[hits.tri_id >= 0] < tmax))
+
+
+def test_kdtree_tests_far_below_n():
+    sc = scene("bunny-948")
+    r = rays("bunny-948", "random")
+    _, cnt = accel("kdtree", "bunny-948").intersect(r.origins, r.directions)
+    per_ray = cnt.mean()
+    assert 0 < per_ray["tests"] < 0.1 * sc.n
+    assert per_ray["nodes"] > per_ray["steps"] > 0
+
+
+def test_kdtree_follows_pbrt_parameters():
+    a = accel("kdtree", "bunny-948")
+    s = a.stats()
+    # pbrt-v2: maxDepth = round(8 + 1.3 * Log2Int(948)) = round(8 + 1.3 * 9) = 20
+    assert s["max_depth"] == 20 and s["depth"] <= 20
+    assert s["params"] == {"isect_cost": 80.0, "trav_cost": 1.0, "empty_bonus": 0.5, "max_prims": 1}
+    # every triangle is referenced, refs in leaf order match the copied vertices
+    assert set(np.unique(a.tri_ids_)) == set(range(scene("bunny-948").n))
+    assert np.array_equal(a.tri_verts_, scene("bunny-948").tris.reshape(-1, 9)[a.tri_ids_])
+    assert s["leaves"] == s["interior"] + 1 and s["nodes"] == s["leaves"] + s["interior"]
+    assert s["stored_nodes"] == s["nodes"] - s["empty_leaves"]
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_stats(structure):
+    s = accel(structure, "particles-2000").stats()
+    for key in ("nodes", "leaves", "depth", "refs", "memory_bytes", "build_s"):
+        assert key in s, key
+    assert s["nodes"] > s["leaves"] > 0 and s["depth"] > 0
+    assert s["refs"] >= scene("particles-2000").n
+    assert s["memory_bytes"] > 0 and s["build_s"] >= 0
+
+
+# ---------------------------------------------------------------- small and empty cases
+def _check(sc, o, d, structure):
+    hits, cnt = build(sc, structure).intersect(o, d)
+    ref, ties = oracle_intersect(sc, o, d)
+    res = compare(hits, ref, ties)
+    assert res["disagreements"] == 0, res
+    return hits, cnt, ref
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_single_triangle(structure):
+    sc = Scene(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), "one")
+    r = make_rays(sc, "random", 2000, seed=1)
+    extra = [[0.25, 0.25, 1.0], [0.25, 0.25, -1.0], [2.0, 2.0, 1.0]]
+    o = np.concatenate([r.origins, extra]).astype(np.float32)
+    d = np.concatenate([r.directions, [[0, 0, -1], [0, 0, 1], [0, 0, -1]]]).astype(np.float32)
+    hits, _, ref = _check(sc, o, d, structure)
+    assert list(hits.tri_id[-3:]) == [0, 0, -1]
+    assert hits.t[-3] == pytest.approx(1.0) and hits.t[-2] == pytest.approx(1.0)
+    assert (ref.tri_id >= 0).sum() > 0
+    a = build(sc, structure)
+    assert a.stats()["refs"] == 1
+    assert list(a.occluded(o[-3:], d[-3:], tmax=[2.0, 0.5, 2.0])) == [True, False, False]
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_rays_that_miss_everything(structure):
+    sc = scene("bunny-948")
+    a = accel(structure, "bunny-948")
+    c = (sc.bounds[0] + sc.bounds[1]) / 2
+    ext = float((sc.bounds[1] - sc.bounds[0]).max())
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(500, 3)).astype(np.float32)
+    # outside the scene, pointing away from it
+    o = (c + 3 * ext * d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    # and rays parallel to an axis passing beside the box
+    o2 = np.tile(c, (6, 1)).astype(np.float32)
+    o2[:, 0] = sc.bounds[1][0] + ext
+    d2 = np.tile(np.array([0, 1, 0], np.float32), (6, 1))
+    o, d = np.concatenate([o, o2]), np.concatenate([d, d2])
+    hits, cnt = a.intersect(o, d)
+    assert np.all(hits.tri_id == -1) and np.all(np.isinf(hits.t))
+    assert cnt.total()["setups"] == 0 and cnt.total()["tests"] == 0
+    assert not a.occluded(o, d, tmax=np.full(len(o), 1e30)).any()
+    # a ray that stops before the scene misses too
+    r = rays("bunny-948", "random")
+    short = a.occluded(r.origins, r.directions, tmax=np.full(len(r.origins), 1e-6 * ext))
+    assert not short.any()
+
+
+@pytest.mark.parametrize("structure", STRUCTURES)
+def test_degenerate_scenes(structure):
+    rng = np.random.default_rng(2)
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32)
+    cases = {
+        # many copies of one triangle: no plane separates them
+        "copies": np.repeat(tri[None], 40, axis=0),
+        # a flat scene: all triangles in the plane z = 0
+        "flat": np.concatenate([rng.random((60, 3, 2)), np.zeros((60, 3, 1))], axis=2).astype(np.float32),
+        # zero-area triangles beside real ones
+        "slivers": np.concatenate([np.repeat(np.zeros((1, 3, 3), np.float32), 5, axis=0),
+                                   rng.random((30, 3, 3)).astype(np.float32)]),
+    }
+    for name, tris in cases.items():
+        sc = Scene(tris, name)
+        r = make_rays(sc, "random", 1000, seed=4)
+        hits, _, ref = _check(sc, r.origins, r.directions, structure)
+        assert (ref.tri_id >= 0).sum() > 0, name
+
+
+def test_empty_scene():
+    sc = Scene(np.zeros((0, 3, 3), np.float32), "empty", bounds=np.array([[0, 0, 0], [1, 1, 1]], np.float32))
+    o = np.zeros((4, 3), np.float32)
+    d = np.tile(np.array([0, 0, 1], np.float32), (4, 1))
+    for structure in STRUCTURES:
+        a = build(sc, structure)
+        hits, cnt = a.intersect(o, d)
+        assert np.all(hits.tri_id == -1) and cnt.total()["tests"] == 0
+        assert not a.occluded(o, d, tmax=1.0).any()
