@@ -138,8 +138,8 @@ def test_cell_counts_follow_ize_rule():
     assert st["cells"] == top["cells"] + sub["cells"]
     assert st["cells"] < 20 * n
     assert st["memory_bytes"] > 0 and st["build_s"] >= 0 and st["levels"] == 2
-    # the long-skinny rule M1 = 8N and an explicit M1
-    assert NestedGrid(m1_rule="ize_skinny").build(s).stats()["M1_target"] == 8 * n
+    # the long-skinny rule (Eq 17: M1 = k N Ti/Ts = 4N with k = 1, Ti/Ts = 4) and an explicit M1
+    assert NestedGrid(m1_rule="ize_skinny").build(s).stats()["M1_target"] == 4 * n
     assert NestedGrid(m1=1000).build(s).stats()["M1_target"] == 1000
 
 
