@@ -97,6 +97,12 @@ class Accel:
     def stats(self) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError
 
+    @staticmethod
+    def _outputs(m: int, count: bool):
+        """Result buffers of a batch of m rays: t (float32), tri_id (int32), counters or None."""
+        return (np.empty(m, np.float32), np.empty(m, np.int32),
+                np.zeros((m, len(COUNTER_NAMES)), np.int32) if count else None)
+
 
 def build(scene, name: str = "grid", **params) -> Accel:
     """Build structure ``name`` (one of :data:`STRUCTURES`) over ``scene`` with ``params``."""

@@ -391,9 +391,7 @@ class BVH(Accel):
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         m = len(o)
-        out_t = np.empty(m, np.float32)
-        out_id = np.empty(m, np.int32)
-        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        out_t, out_id, cnt = self._outputs(m, count)
         if self.n_ == 0:
             out_t[:] = np.inf
             out_id[:] = -1

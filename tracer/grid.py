@@ -316,9 +316,7 @@ class UniformGrid(Accel):
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         m = len(o)
-        out_t = np.empty(m, np.float32)
-        out_id = np.empty(m, np.int32)
-        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        out_t, out_id, cnt = self._outputs(m, count)
         mb = np.empty(((m + CHUNK - 1) // CHUNK, MAILBOX), np.int32) if self.mailbox else None
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,

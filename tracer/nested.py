@@ -415,9 +415,7 @@ class NestedGrid(Accel):
     # -------------------------------------------------------- trace
     def _run(self, o, d, tmin, tmax, anyhit, count):
         m = len(o)
-        out_t = np.empty(m, np.float32)
-        out_id = np.empty(m, np.int32)
-        cnt = np.zeros((m, NCOUNT), np.int32) if count else None
+        out_t, out_id, cnt = self._outputs(m, count)
         lvl = np.zeros((m, self.levels_, len(LEVEL_COUNTERS)), np.int32) if count else None
         nested_trace(o, d, tmin, tmax, anyhit, self.grid_f_, self.grid_i_, self.cells_,
                      self.tri_ids_, self.tri_verts_, self.levels_, out_t, out_id, cnt, lvl)
