@@ -6,7 +6,8 @@ the events in ray order on all three axes at once (the smallest next Delta-t fir
 is IN or OUT depending on the sign of the direction. A child becomes *active* when it has been
 entered on all three axes before it is exited on any (per-child counts 0..3, -1 = processed):
 a triangle is then tested, a BV *opened*. The walk stops when the next event lies past the
-closest hit (or at the first hit for shadow rays).
+closest hit (or at the first hit for shadow rays), or at the end of one of the lists (every
+object has then been exited on that axis).
 
 Hierarchy (Sec. "Building a hierarchy"): top down, a node holding more than ``leaf_size``
 objects lays a regular ``branching`` grid over its objects' box centroids and groups the objects
@@ -20,13 +21,15 @@ Hierarchical traversal (Sec. "Traversing a hierarchy"): opening a BV at Delta-t 
 three lists up to ``t`` (events before it are treated without intersecting anything; children
 found IN on all axes are activated at ``t``) and puts the three next events of the BV in the
 *list of next events*: here one binary heap keyed by (Delta-t, IN before OUT) holding one cursor
-per (open BV, axis). Closing a BV (its OUT event) drops its cursors lazily, when they surface.
+per (open BV, axis). Closing a BV (its OUT event, or the end of one of its lists) drops its
+cursors lazily, when they surface.
 
 Layout (flat arrays): nodes in breadth-first order, node 0 the root; node ``p``'s children are
 the *slots* ``child_start_[p] .. child_start_[p+1]``, a slot being a triangle (``slot_tri_ >= 0``,
 vertices in ``tri_verts_[slot]``) or a BV (``slot_node_``). Node ``p``'s events on axis ``k`` are
-``ev_val_[k, 2 cs[p] : 2 cs[p+1]]`` (float32, sorted, lo before hi at equal values) and
-``ev_code_`` (2 slot + is_hi). Per-chunk scratch: child states (int8 per slot), cursors, heap.
+``ev_val_[6 a + 2 m k : 6 a + 2 m (k + 1)]`` with a = cs[p], m = cs[p+1] - a (node-major, so
+one node's events are contiguous; float32, sorted, lo before hi at equal values) and ``ev_code_``
+(2 slot + is_hi). Per-chunk scratch: child states (int8 per slot), cursors, heap.
 
 Robustness: object boxes are padded outwards (``PAD_REL`` of the scene extent plus a few float32
 ulps) so that a hit found by :func:`tracer.geometry.ray_triangle` lies strictly inside its box
@@ -80,6 +83,16 @@ def _node_bounds(tb, perm, s, e):
 
 
 @jit
+def _new_bv(q_s, q_e, slot_node, node_slot, depth, p, q, slot, s, e):
+    """Make slot ``slot`` of node ``p`` the new BV ``q`` over objects perm[s:e] (queued)."""
+    slot_node[slot] = q
+    node_slot[q] = slot
+    depth[q] = depth[p] + 1
+    q_s[q] = s
+    q_e[q] = e
+
+
+@jit
 def build_hierarchy(tb, leaf_size, bx, by, bz, big, flat):
     """Top-down grid-of-centroids hierarchy over object boxes ``tb`` (N, 6) float32.
 
@@ -116,30 +129,27 @@ def build_hierarchy(tb, leaf_size, bx, by, bz, big, flat):
             p += 1
             continue
         lo, hi, clo, chi = _node_bounds(tb, perm, s, e)
-        # the "special grid element": a few objects spanning a large part of the node
+        # the "special grid element": up to leaf_size objects spanning more than `big` of the node
         r = s
         if big > 0.0:
-            ext = max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
+            lim = big * max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2])
             nb = 0
             for i in range(s, e):
                 t = perm[i]
-                oe = max(tb[t, 3] - tb[t, 0], tb[t, 4] - tb[t, 1], tb[t, 5] - tb[t, 2])
-                if oe > big * ext:
-                    nb += 1
+                cell[i] = 1 if max(tb[t, 3] - tb[t, 0], tb[t, 4] - tb[t, 1], tb[t, 5] - tb[t, 2]) > lim else 0
+                nb += cell[i]
             if 0 < nb <= leaf_size and nb < m:
-                w = s
-                u = 0
-                for i in range(s, e):
-                    t = perm[i]
-                    oe = max(tb[t, 3] - tb[t, 0], tb[t, 4] - tb[t, 1], tb[t, 5] - tb[t, 2])
-                    if oe > big * ext:
-                        perm[w] = t
+                w = 0
+                u = nb
+                for i in range(s, e):  # stable partition, the big objects first
+                    if cell[i] == 1:
+                        tmp[w] = perm[i]
                         w += 1
                     else:
-                        tmp[u] = t
+                        tmp[u] = perm[i]
                         u += 1
-                for i in range(u):
-                    perm[w + i] = tmp[i]
+                for i in range(m):
+                    perm[s + i] = tmp[i]
                 for i in range(s, s + nb):
                     slot_tri[nslot] = perm[i]
                     nslot += 1
@@ -151,11 +161,7 @@ def build_hierarchy(tb, leaf_size, bx, by, bz, big, flat):
         nz = bz if chi[2] > clo[2] else 1
         if rest <= 1 or nx * ny * nz == 1 or (r > s and rest <= leaf_size):
             if rest >= 2 and r > s:  # the small rest: one child BV beside the big objects
-                slot_node[nslot] = nn
-                node_slot[nn] = nslot
-                depth[nn] = depth[p] + 1
-                q_s[nn] = r
-                q_e[nn] = e
+                _new_bv(q_s, q_e, slot_node, node_slot, depth, p, nn, nslot, r, e)
                 nn += 1
                 nslot += 1
             else:
@@ -199,11 +205,7 @@ def build_hierarchy(tb, leaf_size, bx, by, bz, big, flat):
                 slot_tri[nslot] = perm[r + start]
                 nslot += 1
             elif k >= 2:
-                slot_node[nslot] = nn
-                node_slot[nn] = nslot
-                depth[nn] = depth[p] + 1
-                q_s[nn] = r + start
-                q_e[nn] = r + end
+                _new_bv(q_s, q_e, slot_node, node_slot, depth, p, nn, nslot, r + start, r + end)
                 nn += 1
                 nslot += 1
             start = end
@@ -230,8 +232,8 @@ def build_events(cs, slot_tri, slot_node, tb):
                     nbox[p, k] = min(nbox[p, k], v)
                 else:
                     nbox[p, k] = max(nbox[p, k], v)
-    ev_val = np.empty((3, 2 * ns), np.float32)
-    ev_code = np.empty((3, 2 * ns), np.int32)
+    ev_val = np.empty(6 * ns, np.float32)
+    ev_code = np.empty(6 * ns, np.int32)
     for p in range(nb):
         a = cs[p]
         m = cs[p + 1] - a
@@ -249,8 +251,8 @@ def build_events(cs, slot_tri, slot_node, tb):
             order = np.argsort(vals, kind="mergesort")  # stable: lo before hi at equal values
             for j in range(2 * m):
                 o = order[j]
-                ev_val[k, 2 * a + j] = vals[o]
-                ev_code[k, 2 * a + j] = 2 * (a + (o % m)) + (1 if o >= m else 0)
+                ev_val[6 * a + 2 * m * k + j] = vals[o]
+                ev_code[6 * a + 2 * m * k + j] = 2 * (a + (o % m)) + (1 if o >= m else 0)
     return nbox, ev_val, ev_code
 
 
@@ -278,108 +280,78 @@ def _ev_t(val, hi, o, inv, mode):
 
 
 @jit(inline="always")
-def _less(c_t, c_in, a, b):
-    ta = c_t[a]
-    tb = c_t[b]
-    return ta < tb or (ta == tb and c_in[a] > c_in[b])
+def _treat(st, s, isin, pend, npend):
+    """Treat an event of child slot ``s``: IN counts up (and queues the child in ``pend`` when it
+    reaches 3), OUT marks it processed (-1); a processed child is skipped. Written without
+    branches (events are the inner loop, and their outcome is unpredictable).
+    Returns (npend, 1 if skipped else 0)."""
+    v = st[s]
+    nv = v + 1 if isin else -1
+    if v < 0:
+        nv = v
+    st[s] = nv
+    pend[npend] = s
+    return npend + (nv == 3), v < 0
 
 
-@jit
-def _sift_up(hp, c_t, c_in, i):
-    c = hp[i]
+@jit(inline="always")
+def _heap_push(hp, h_t, h_in, n, c, t, isin):
+    """Insert cursor ``c`` with key (t, IN first) into the heap hp[0:n] (keys h_t, h_in kept in
+    heap order beside it). Returns the new size."""
+    i = n
     while i > 0:
         p = (i - 1) >> 1
-        q = hp[p]
-        if _less(c_t, c_in, c, q):
-            hp[i] = q
+        tp = h_t[p]
+        if (t < tp) | ((t == tp) & (isin > h_in[p])):
+            hp[i] = hp[p]
+            h_t[i] = tp
+            h_in[i] = h_in[p]
             i = p
         else:
             break
     hp[i] = c
+    h_t[i] = t
+    h_in[i] = isin
+    return n + 1
 
 
-@jit
-def _sift_down(hp, n, c_t, c_in, i):
-    c = hp[i]
+@jit(inline="always")
+def _heap_down(hp, h_t, h_in, n, c, t, isin):
+    """Put cursor ``c`` with key (t, isin) at the top of the heap hp[0:n] and sift it down."""
+    i = 0
     while True:
         m = 2 * i + 1
         if m >= n:
             break
-        if m + 1 < n and _less(c_t, c_in, hp[m + 1], hp[m]):
-            m += 1
-        if _less(c_t, c_in, hp[m], c):
+        tm = h_t[m]
+        im = h_in[m]
+        if m + 1 < n:
+            t2 = h_t[m + 1]
+            i2 = h_in[m + 1]
+            if (t2 < tm) | ((t2 == tm) & (i2 > im)):
+                m += 1
+                tm = t2
+                im = i2
+        if (tm < t) | ((tm == t) & (im > isin)):
             hp[i] = hp[m]
+            h_t[i] = tm
+            h_in[i] = im
             i = m
         else:
             break
     hp[i] = c
+    h_t[i] = t
+    h_in[i] = isin
 
 
-@jit
-def _open(p, t_open, cs, ev_val, ev_code, st, org, inv, mode, hp, hn, nc, c_pos, c_end, c_node, c_ax,
-          c_t, c_in, pend, npend):
-    """Open node ``p`` at Delta-t ``t_open``: reset its children's states, treat the events before
-    ``t_open`` on each axis (children IN everywhere go to ``pend``), push one cursor per axis.
-    Returns (hn, nc, npend, steps, skips)."""
-    a = cs[p]
-    b = cs[p + 1]
-    for s in range(a, b):
-        st[s] = 0
-    steps = 0
-    skips = 0
-    for k in range(3):
-        md = mode[k]
-        if md == 1:
-            pos = 2 * b - 1
-            end = 2 * a - 1
-            step = -1
-        else:
-            pos = 2 * a
-            end = 2 * b
-            step = 1
-        o = org[k]
-        iv = inv[k]
-        t = INF
-        isin = False
-        while pos != end:
-            code = ev_code[k, pos]
-            t, isin = _ev_t(ev_val[k, pos], code & 1, o, iv, md)
-            if t < t_open or (t == t_open and isin):
-                steps += 1
-                s = code >> 1
-                v = st[s]
-                if v < 0:
-                    skips += 1
-                elif isin:
-                    v += 1
-                    st[s] = v
-                    if v == 3:
-                        pend[npend] = s
-                        npend += 1
-                else:
-                    st[s] = -1
-                pos += step
-            else:
-                break
-        if pos != end and t < INF:
-            c = nc
-            nc += 1
-            c_pos[c] = pos
-            c_end[c] = end
-            c_node[c] = p
-            c_ax[c] = k
-            c_t[c] = t
-            c_in[c] = 1 if isin else 0
-            hp[hn] = c
-            hn += 1
-            _sift_up(hp, c_t, c_in, hn - 1)
-    return hn, nc, npend, steps, skips
+@jit(inline="always")
+def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
+           st, pend, hp, h_t, h_in, c_pos, c_end, c_slot, c_ax, org, inv, mode):
+    """Trace one ray; returns (t, tri_id, setups, steps, tests, nodes, skips).
 
-
-@jit
-def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, node_slot, nbox, tv,
-           ev_val, ev_code, st, hp, c_pos, c_end, c_node, c_ax, c_t, c_in, pend, org, inv, mode):
-    """Trace one ray; returns (t, tri_id, setups, steps, tests, nodes, skips)."""
+    One loop: open the BV pending (the root first) at the current Delta-t ``tcur``; activate the
+    children queued in ``pend`` (test a triangle, or leave a BV to be opened next); else treat the
+    next event, the top of the heap of cursors, unless it lies past the closest hit."""
     org[0] = ox
     org[1] = oy
     org[2] = oz
@@ -387,22 +359,12 @@ def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, 
     t1 = INF
     for k in range(3):
         d = dx if k == 0 else (dy if k == 1 else dz)
-        if d > 0.0:
-            mode[k] = 0
-            inv[k] = 1.0 / d
-        elif d < 0.0:
-            mode[k] = 1
-            inv[k] = 1.0 / d
-        else:
-            mode[k] = 2
-            inv[k] = 0.0
-        md = mode[k]
-        if md == 1:  # the root box's IN and OUT events on this axis
-            ta, _ = _ev_t(nbox[0, 3 + k], 1, org[k], inv[k], md)
-            tb, _ = _ev_t(nbox[0, k], 0, org[k], inv[k], md)
-        else:
-            ta, _ = _ev_t(nbox[0, k], 0, org[k], inv[k], md)
-            tb, _ = _ev_t(nbox[0, 3 + k], 1, org[k], inv[k], md)
+        md = 0 if d > 0.0 else (1 if d < 0.0 else 2)
+        mode[k] = md
+        inv[k] = 1.0 / d if md < 2 else 0.0
+        up = 1 if md == 1 else 0  # the root box's IN and OUT events on this axis
+        ta, _ = _ev_t(nbox[0, k + 3 * up], up, org[k], inv[k], md)
+        tb, _ = _ev_t(nbox[0, k + 3 - 3 * up], 1 - up, org[k], inv[k], md)
         t0 = max(t0, ta)
         t1 = min(t1, tb)
     if t0 > t1 or t1 < tmin or t0 > tmax:
@@ -410,11 +372,52 @@ def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, 
     best = float(tmax)
     best_id = -1
     tcur = max(t0, tmin)
-    hn, nc, npend, steps, skips = _open(0, tcur, cs, ev_val, ev_code, st, org, inv, mode, hp, 0, 0, c_pos,
-                                        c_end, c_node, c_ax, c_t, c_in, pend, 0)
+    steps = 0
+    skips = 0
     tests = 0
-    nodes = 1
+    nodes = 0
+    hn = 0
+    nc = 0
+    npend = 0
+    q_open = 0  # the BV to open now (node id; -1 none) and its slot in its parent (-1: root)
+    s_open = -1
     while True:
+        if q_open >= 0:
+            # open BV q_open at tcur: reset its children, treat its events up to tcur, push cursors
+            nodes += 1
+            a = cs[q_open]
+            b = cs[q_open + 1]
+            for j in range(a, b):
+                st[j] = 0
+            m2 = 2 * (b - a)
+            for k in range(3):
+                md = mode[k]
+                lo = 6 * a + m2 * k
+                step = -1 if md == 1 else 1  # walk the list backwards for a negative direction
+                pos = lo + m2 - 1 if md == 1 else lo
+                end = lo - 1 if md == 1 else lo + m2
+                o = org[k]
+                iv = inv[k]
+                t = INF
+                isin = False
+                while pos != end:
+                    code = ev_code[pos]
+                    t, isin = _ev_t(ev_val[pos], code & 1, o, iv, md)
+                    if (t < tcur) | ((t == tcur) & isin):
+                        steps += 1
+                        npend, sk = _treat(st, code >> 1, isin, pend, npend)
+                        skips += sk
+                        pos += step
+                    else:
+                        break
+                if pos != end and t < INF:
+                    c_pos[nc] = pos
+                    c_end[nc] = end
+                    c_slot[nc] = s_open
+                    c_ax[nc] = k
+                    hn = _heap_push(hp, h_t, h_in, hn, nc, t, np.int8(1 if isin else 0))
+                    nc += 1
+            q_open = -1
         # activate the children that became IN on all axes at tcur
         while npend > 0:
             npend -= 1
@@ -422,67 +425,87 @@ def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, 
             if st[s] != 3:
                 continue
             q = slot_node[s]
-            if q < 0:
-                tests += 1
-                t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[s, 0], tv[s, 1], tv[s, 2], tv[s, 3], tv[s, 4],
-                                 tv[s, 5], tv[s, 6], tv[s, 7], tv[s, 8], tmin, best)
-                if t < best:
-                    best = t
-                    best_id = slot_tri[s]
-                    if anyhit:
-                        return best, best_id, 1, steps, tests, nodes, skips
-            else:
-                nodes += 1
-                hn, nc, npend, a, b = _open(q, tcur, cs, ev_val, ev_code, st, org, inv, mode, hp, hn, nc,
-                                            c_pos, c_end, c_node, c_ax, c_t, c_in, pend, npend)
-                steps += a
-                skips += b
+            if q >= 0:
+                q_open = q
+                s_open = s
+                break
+            tests += 1
+            t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[s, 0], tv[s, 1], tv[s, 2], tv[s, 3], tv[s, 4],
+                             tv[s, 5], tv[s, 6], tv[s, 7], tv[s, 8], tmin, best)
+            if t < best:
+                best = t
+                best_id = slot_tri[s]
+                if anyhit:
+                    return best, best_id, 1, steps, tests, nodes, skips
+        if q_open >= 0:
+            continue
         if hn == 0:
             break
         c = hp[0]
-        t = c_t[c]
+        t = h_t[0]
         if t > best:
             break
-        p = c_node[c]
-        k = c_ax[c]
-        md = mode[k]
-        if p == 0 or st[node_slot[p]] >= 0:  # a cursor of a BV still open: treat its event
+        ps = c_slot[c]
+        nk = t
+        ni = h_in[0]
+        if ps < 0 or st[ps] >= 0:  # a cursor of the root or of a BV still open: treat its event
+            k = c_ax[c]
+            md = mode[k]
             pos = c_pos[c]
-            s = ev_code[k, pos] >> 1
             steps += 1
-            v = st[s]
-            if v < 0:
-                skips += 1
-            elif c_in[c] == 1:
-                v += 1
-                st[s] = v
-                if v == 3:
-                    pend[npend] = s
-                    npend += 1
-            else:
-                st[s] = -1
+            npend, sk = _treat(st, ev_code[pos] >> 1, ni == 1, pend, npend)
+            skips += sk
             tcur = t
             pos += -1 if md == 1 else 1
             if pos != c_end[c]:
-                code = ev_code[k, pos]
-                t2, in2 = _ev_t(ev_val[k, pos], code & 1, org[k], inv[k], md)
+                code = ev_code[pos]
+                t2, in2 = _ev_t(ev_val[pos], code & 1, org[k], inv[k], md)
                 c_pos[c] = pos
-                c_t[c] = t2
-                c_in[c] = 1 if in2 else 0
-                _sift_down(hp, hn, c_t, c_in, 0)
+                nk = t2
+                ni = np.int8(1 if in2 else 0)
+            else:
+                # the end of one of the node's lists: every child has been exited on this axis, so
+                # none can become active any more (the paper's termination, per BV): close the node
+                if ps < 0:
+                    break
+                st[ps] = -1
+                c = -1
+        else:
+            c = -1
+        if c < 0:  # cursor exhausted, or its BV closed: drop it
+            hn -= 1
+            if hn == 0:
                 continue
-        # cursor exhausted, or its BV closed: drop it
-        hn -= 1
-        if hn > 0:
-            hp[0] = hp[hn]
-            _sift_down(hp, hn, c_t, c_in, 0)
+            c = hp[hn]
+            nk = h_t[hn]
+            ni = h_in[hn]
+        _heap_down(hp, h_t, h_in, hn, c, nk, ni)
     if best_id < 0:
         best = INF
     return best, best_id, 1, steps, tests, nodes, skips
 
 
+@jit
+def sl_chunk(lo, hi, O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
+             out_t, out_id, counters, st, pend, hp, h_t, h_in, c_pos, c_end, c_slot, c_ax, org, inv, mode):
+    """Trace rays lo..hi with one set of scratch buffers (arrays are passed once per chunk)."""
+    for i in range(lo, hi):
+        t, tid, su, stp, te, nv, sk = sl_ray(
+            float(O[i, 0]), float(O[i, 1]), float(O[i, 2]), float(D[i, 0]), float(D[i, 1]), float(D[i, 2]),
+            tmin, float(tmax[i]), anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
+            st, pend, hp, h_t, h_in, c_pos, c_end, c_slot, c_ax, org, inv, mode)
+        out_t[i] = t
+        out_id[i] = tid
+        if counters is not None:
+            counters[i, 0] = su
+            counters[i, 1] = stp
+            counters[i, 2] = te
+            counters[i, 3] = nv
+            counters[i, 4] = sk
+
+
 @pjit
-def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, node_slot, nbox, tv, ev_val, ev_code,
+def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
              out_t, out_id, counters):
     """Batched traversal, ``prange`` over chunks of CHUNK rays, one set of scratch buffers per chunk;
     ``counters`` (m, 5) int32 or None (the variant without counting)."""
@@ -494,29 +517,18 @@ def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, node_slot, nbox,
         st = np.empty(ns, np.int8)
         pend = np.empty(ns + 1, np.int32)
         hp = np.empty(ncur, np.int32)
+        h_t = np.empty(ncur, np.float64)
+        h_in = np.empty(ncur, np.int8)
         c_pos = np.empty(ncur, np.int64)
         c_end = np.empty(ncur, np.int64)
-        c_node = np.empty(ncur, np.int32)
+        c_slot = np.empty(ncur, np.int32)
         c_ax = np.empty(ncur, np.int8)
-        c_t = np.empty(ncur, np.float64)
-        c_in = np.empty(ncur, np.int8)
         org = np.empty(3, np.float64)
         inv = np.empty(3, np.float64)
         mode = np.empty(3, np.int8)
-        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, stp, te, nv, sk = sl_ray(
-                float(O[i, 0]), float(O[i, 1]), float(O[i, 2]),
-                float(D[i, 0]), float(D[i, 1]), float(D[i, 2]), tmin, float(tmax[i]), anyhit,
-                cs, slot_tri, slot_node, node_slot, nbox, tv, ev_val, ev_code,
-                st, hp, c_pos, c_end, c_node, c_ax, c_t, c_in, pend, org, inv, mode)
-            out_t[i] = t
-            out_id[i] = tid
-            if counters is not None:
-                counters[i, 0] = su
-                counters[i, 1] = stp
-                counters[i, 2] = te
-                counters[i, 3] = nv
-                counters[i, 4] = sk
+        sl_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox,
+                 tv, ev_val, ev_code, out_t, out_id, counters, st, pend, hp, h_t, h_in, c_pos, c_end, c_slot,
+                 c_ax, org, inv, mode)
 
 
 class SortedLists(Accel):
@@ -570,8 +582,9 @@ class SortedLists(Accel):
             if cnt is not None:
                 cnt[:, 0] = 1
             return out_t, out_id, cnt
-        sl_trace(o, d, tmin, tmax, anyhit, self.child_start_, self.slot_tri_, self.slot_node_, self.node_slot_,
-                 self.node_box_, self.tri_verts_, self.ev_val_, self.ev_code_, out_t, out_id, cnt)
+        if not tmax.flags.writeable:  # a read-only array would compile another variant
+            tmax = tmax.copy()
+        sl_trace(o, d, tmin, tmax, anyhit, self.child_start_, self.slot_tri_, self.slot_node_, self.node_box_, self.tri_verts_, self.ev_val_, self.ev_code_, out_t, out_id, cnt)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
@@ -583,7 +596,7 @@ class SortedLists(Accel):
                                      self.ev_val_, self.ev_code_, self.tri_verts_))
         return {
             "structure": "sortedlists", "nodes": nb, "leaves": int(leaf.sum()), "slots": int(len(self.slot_tri_)),
-            "events": int(self.ev_val_.shape[1]) * 3, "depth": int(self.depth_.max(initial=0)) + 1,
+            "events": int(self.ev_val_.shape[0]), "depth": int(self.depth_.max(initial=0)) + 1,
             "max_children": int(kids.max(initial=0)), "mean_children": float(kids.mean()) if nb else 0.0,
             "root_children": int(kids[0]) if nb else 0,
             "memory_bytes": int(mem), "build_s": self.build_seconds_,
