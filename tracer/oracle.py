@@ -53,6 +53,30 @@ def oracle_intersect(scene, origins, directions, tmin: float = 0.0, tmax=None):
     return Hits(out_t, out_id), ties
 
 
+def oracle_cached(scene, origins, directions, tmin: float = 0.0, tmax=None):
+    """:func:`oracle_intersect` with its answer kept in the mesh cache ($GRIDCOST_CACHE), keyed by
+    the triangles, the rays and the ray range, so verifying several structures pays once."""
+    import hashlib
+
+    import numpy as np
+
+    from tracer.scene import _atomic_savez, cache_dir
+    o, d = as_rays(origins, directions)
+    h = hashlib.sha1()
+    for a in (scene.tris, o, d, tmax_array(tmax, len(o)), np.float64(tmin)):
+        h.update(np.ascontiguousarray(a).tobytes())
+    path = cache_dir() / "oracle" / f"{h.hexdigest()}.npz"
+    if path.exists():
+        try:
+            z = np.load(path)
+            return Hits(z["t"], z["tri_id"]), z["ties"]
+        except Exception:
+            pass
+    hits, ties = oracle_intersect(scene, o, d, tmin, tmax)
+    _atomic_savez(path, t=hits.t, tri_id=hits.tri_id, ties=ties)
+    return hits, ties
+
+
 def compare(hits: Hits, ref: Hits, ref_ties: np.ndarray, rtol: float = 1e-5) -> dict:
     """Count disagreements of ``hits`` with the oracle's ``ref``.
 
