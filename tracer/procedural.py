@@ -6,8 +6,9 @@
 ``particles-N``             N small triangles scattered uniformly in a unit cube ("exploding
                             particles", Ize 2007 Sec 4.3: scattered data)
 ``teapot-in-stadium``       the teapot mesh inside a box 200x its size (the classic grid failure)
-``room``                    ~280K-triangle room of tables and chairs made of subdivided boxes,
-                            standing in for Ize's conference room (282,664 triangles)
+``room``                    ~270K-triangle room of tables and chairs made of subdivided boxes on a
+                            floor (no walls, so outside rays reach them), standing in for Ize's
+                            conference room (282,664 triangles)
 ``sphere-N``                UV sphere of about N triangles
 ``knot-N``                  a (3, 2) torus-knot tube of about N triangles
 ``boxes-N``                 N random axis-aligned boxes (12 triangles each)
@@ -178,7 +179,7 @@ def room(target: int = 280_000) -> np.ndarray:
     """A conference-room stand-in: walls/floor/ceiling plus rows of tables with chairs, each part a
     box whose faces are subdivided so the total is about ``target`` triangles."""
     parts = []
-    W, D, H = 30.0, 20.0, 4.0
+    W, D = 30.0, 20.0
     for i in range(6):
         for j in range(8):
             x0, y0 = 2.0 + i * 4.5, 1.5 + j * 2.3
@@ -196,6 +197,7 @@ def room(target: int = 280_000) -> np.ndarray:
                         for ly in (cy, cy + 0.4):
                             parts.append(((lx, ly, 0.0), (lx + 0.05, ly + 0.05, 0.45)))  # chair legs
     sub = max(1, int(round(np.sqrt(target / (12.0 * (len(parts) + 1))))))
-    tris = [box((0, 0, 0), (W, D, H), sub=4 * sub)]
+    # a floor slab but no walls or ceiling: rays from outside (random rays) must reach the furniture
+    tris = [box((0, 0, -0.1), (W, D, 0.0), sub=4 * sub)]
     tris += [box(lo, hi, sub=sub) for lo, hi in parts]
     return np.concatenate(tris).astype(np.float32)
