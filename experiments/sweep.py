@@ -9,7 +9,7 @@ from tqdm import tqdm
 
 from experiments.results import PointStore
 from tracer.accel import build
-from tracer.timing import time_call
+from tracer.timing import clock_name, time_call
 
 QUICK_FACTORS = [2.0**k for k in range(-3, 7)]              # N/8 ... 64N, 10 points
 FULL_FACTORS = [2.0 ** (k / 2) for k in range(-6, 13)]      # N/8 ... 64N, 19 points
@@ -31,7 +31,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
             "cells": st.get("cells"), "M1": st.get("M1"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
             "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
             "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds": tm.median, "seconds_min": tm.min,
-            "spread": tm.spread, "ns_per_ray": tm.median / r.n * 1e9,
+            "spread": tm.spread, "clock": clock_name(), "ns_per_ray": tm.median / r.n * 1e9,
             **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},
             "hits": float((accel.intersect(r.origins[:2000], r.directions[:2000], counters=False)[0].tri_id >= 0).mean()),
             "threads": numba.get_num_threads(), "worker": socket.gethostname(),
