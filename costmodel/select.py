@@ -1,0 +1,622 @@
+"""Hapala, Karlik & Havran 2011, "When it makes sense to use uniform grids for ray tracing": the
+critical number of rays R_C, the paper's calibration and 8-step decision algorithm, its estimator
+(Eq 7, Eq 8), an improved estimator built on what gridcost knows, Havran's scene statistics (Eq 1-6)
+and the paper's evaluation protocol (random calibration/evaluation splits, Err = 100 (R_est - R_C) / R_C).
+
+Units: every time is in seconds (build times T_B, per-ray times t_R); R_C is a number of rays.
+scikit-learn conventions: parameters in ``__init__``, ``fit`` returns self, fitted attributes end in ``_``.
+
+Calibration records are a :class:`pandas.DataFrame` with one row per (scene, ray kind) and the
+columns ``scene``, ``kind``, ``N``, ``T_BG``, ``t_RG`` (all rays), ``t_RG_sample`` (the
+sampled rays, what the decision algorithm sees), ``T_BH``, ``t_RH``, the grid's sampled counters and
+Havran statistics. ``experiments.hapala_table1.calibrate_scene`` measures them (calibration steps
+1-4, with :func:`probe_grid` for the decision's sample); :func:`records` flattens its output.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+
+import numpy as np
+import pandas as pd
+
+from tracer.constants import HAPALA_EPS
+
+#: grid resolution of the calibration and the decision (Hapala Sec 3: "number of cells proportional
+#: to N"; the constant is not given, we use cells = N, the classic choice of Cleary & Wyvill / Havran)
+GRID_FACTOR = 1.0
+#: sample sizes for the grid's per-ray time (the paper: "100 to 1000 rays")
+SAMPLE_SIZES = (100, 300, 1000, 3000)
+DEFAULT_SAMPLE = 1000
+#: which statistic of repeated timings the records use ("min": interference only adds time)
+TIME_STAT = "min"
+#: version of the calibration protocol (stored measurements of another protocol are redone)
+PROTOCOL = "thread-cpu-time/single-pass-probe/4"
+#: Err of an estimate that says "grid always" (R_est = inf) while the true R_C is finite, in percent
+ERR_CAP = 1000.0
+
+
+# ============================================================ Havran statistics (Hapala Eq 1-6)
+def cell_counts(grid) -> np.ndarray:
+    """Per-cell reference counts N_i of a built :class:`tracer.grid.UniformGrid` (or the counts)."""
+    if hasattr(grid, "cell_start_"):
+        return np.diff(np.asarray(grid.cell_start_, np.int64))
+    return np.asarray(grid, np.int64).ravel()
+
+
+def sparseness_eq1(counts, n_prims: int) -> float:
+    """Eq 1 as printed: sparseness = #empty cells / N (N = number of primitives).
+    The text says "ratio of empty cells to all cells"; see :func:`sparseness_cells`."""
+    return float((np.asarray(counts) == 0).sum()) / max(int(n_prims), 1)
+
+
+def sparseness_cells(counts) -> float:
+    """Eq 1 as the text defines it: sparseness = #empty cells / t (t = number of cells)."""
+    counts = np.asarray(counts)
+    return float((counts == 0).sum()) / max(counts.size, 1)
+
+
+def max_refs(counts) -> int:
+    """Eq 2: maxRefs = max_i N_i, i in 1..t."""
+    return int(np.max(counts, initial=0))
+
+
+def mean_refs(counts) -> float:
+    """Eq 3: mean = (1/t) sum_i N_i."""
+    return float(np.mean(np.asarray(counts, float)))
+
+
+def variance_refs(counts) -> float:
+    """Eq 4: variance = 1/(t - 1) sum_i (N_i - mean)^2 (sample variance; nan for t = 1)."""
+    c = np.asarray(counts, float)
+    return float(((c - c.mean()) ** 2).sum() / (c.size - 1)) if c.size > 1 else float("nan")
+
+
+def sigma_refs(counts) -> float:
+    """sigma = sqrt(variance) with the variance of Eq 4."""
+    return float(np.sqrt(variance_refs(counts)))
+
+
+def skewness_refs(counts) -> float:
+    """Eq 5: skewness = (1/t) sum_i ((N_i - mean) / sigma)^3, sigma from Eq 4 (nan when sigma = 0)."""
+    c = np.asarray(counts, float)
+    s = sigma_refs(c)
+    return float(np.mean(((c - c.mean()) / s) ** 3)) if s > 0 else float("nan")
+
+
+def kurtosis_refs(counts) -> float:
+    """Eq 6: kurtosis = (1/t) sum_i ((N_i - mean) / sigma)^4 - 3, sigma from Eq 4 (nan when sigma = 0)."""
+    c = np.asarray(counts, float)
+    s = sigma_refs(c)
+    return float(np.mean(((c - c.mean()) / s) ** 4) - 3.0) if s > 0 else float("nan")
+
+
+def havran_stats(grid, n_prims: int | None = None) -> dict:
+    """Havran's scene statistics (Hapala Eq 1-6) of a built uniform grid (or of per-cell counts
+    with ``n_prims``): both readings of sparseness, maxRefs, mean, variance, sigma, skewness, kurtosis."""
+    c = cell_counts(grid)
+    n = int(n_prims if n_prims is not None else getattr(grid, "n_", c.sum()))
+    return {"cells": int(c.size), "empty_cells": int((c == 0).sum()),
+            "sparseness_eq1": sparseness_eq1(c, n), "sparseness_cells": sparseness_cells(c),
+            "max_refs": max_refs(c), "mean": mean_refs(c), "variance": variance_refs(c),
+            "sigma": sigma_refs(c), "skewness": skewness_refs(c), "kurtosis": kurtosis_refs(c)}
+
+
+# ============================================================ the critical point
+def exact_rc(T_BH, t_RG, t_RH, eps: float = HAPALA_EPS):
+    """Hapala Sec 3 step 6: R_C = T_B^H / (t_R^G (1 + eps) - t_R^H), the number of rays above which
+    building the hierarchy pays off; inf ("grid always", step 5) when t_R^H >= t_R^G. Arrays broadcast."""
+    T_BH, t_RG, t_RH = np.broadcast_arrays(*(np.asarray(v, float) for v in (T_BH, t_RG, t_RH)))
+    den = t_RG * (1.0 + eps) - t_RH
+    grid_always = (t_RH >= t_RG) | ~(den > 0)
+    out = np.where(grid_always, np.inf, T_BH / np.where(grid_always, 1.0, den))
+    return float(out) if out.ndim == 0 else out
+
+
+def rc_error(r_est, r_true, cap: float = ERR_CAP):
+    """Err = 100 (R_est - R_C) / R_C in percent (Hapala Sec 4), for finite R_C; an estimate of inf
+    ("grid always") scores ``cap``, and Err is clipped to [-100, cap]. Rows with R_C = inf give nan."""
+    r_est, r_true = np.asarray(r_est, float), np.asarray(r_true, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = 100.0 * (r_est - r_true) / r_true
+    err = np.where(np.isinf(r_est), cap, np.clip(err, -100.0, cap))
+    return np.where(np.isfinite(r_true), err, np.nan)
+
+
+# ============================================================ timing of the calibration and the decision's sample
+def time_stats(runs) -> dict:
+    """Median and minimum of repeated timings (interference only ever adds time: the minimum is the
+    less noisy estimate on a shared machine, the median the conventional one)."""
+    return {"median": float(np.median(runs)), "min": float(np.min(runs))}
+
+
+@contextmanager
+def single_thread():
+    """Run the Numba kernels on the calling thread only: the times here are the calling thread's CPU
+    time (``time.thread_time``), which a shared machine does not inflate the way it does wall time."""
+    import numba
+    n = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(n)
+
+
+def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
+    """Per-ray CPU time {median, min over parts} of tracing ``o, d`` once, the way an application
+    traces its first rays: the first ``warm`` rays are traced untimed (cold caches after the build),
+    then each of ``chunks`` parts of the rest is traced once (repeating the same few rays lets the
+    caches and the branch predictor learn them: up to 2.5x too fast), minus the per-call overhead
+    (the median time of a 1-ray call)."""
+    o1, d1 = o[:1].copy(), d[:1].copy()
+    accel.intersect(o1, d1, counters=False)
+    ov = []
+    for _ in range(15):
+        t0 = time.thread_time()
+        accel.intersect(o1, d1, counters=False)
+        ov.append(time.thread_time() - t0)
+    overhead = float(np.median(ov))
+    warm = min(int(warm), len(o) - 1)
+    if warm > 0:
+        accel.intersect(o[:warm], d[:warm], counters=False)
+    per = []
+    for part in np.array_split(np.arange(warm, len(o)), max(1, chunks)):
+        po, pd_ = np.ascontiguousarray(o[part]), np.ascontiguousarray(d[part])
+        t0 = time.thread_time()
+        accel.intersect(po, pd_, counters=False)
+        dt = time.thread_time() - t0
+        per.append(max(dt - overhead, 0.25 * dt) / max(len(part), 1))
+    return time_stats(per)
+
+
+def probe_grid(grid, rays, sample: int = DEFAULT_SAMPLE, seed: int = 0, idx: np.ndarray | None = None) -> dict:
+    """Decision step 2: the grid's time per ray on ``sample`` of ``rays`` (a random subset, or
+    ``idx``), each ray traced once (:func:`single_pass_time`: the first 10 % warm the caches, the
+    rest is timed in parts of >= 180 rays, at most 5), and what the grid's counters say about them:
+    fraction of rays meeting the scene box (``box_frac``), hit fraction, mean cells stepped and
+    triangles tested."""
+    if idx is None:
+        idx = np.random.default_rng(seed).permutation(rays.n)[:sample]
+    o = np.ascontiguousarray(rays.origins[idx])
+    d = np.ascontiguousarray(rays.directions[idx])
+    with single_thread():
+        t = single_pass_time(grid, o, d, chunks=min(5, max(1, len(idx) // 200)), warm=len(idx) // 10)
+    hits, cnt = grid.intersect(o, d, counters=True)
+    m = cnt.mean()
+    return {"t": t[TIME_STAT], "t_median": t["median"], "t_min": t["min"], "box_frac": m["setups"],
+            "hit_frac": float((hits.tri_id >= 0).mean()), "steps": m["steps"], "tests": m["tests"],
+            "rays": int(len(idx))}
+
+
+def _pick(v, stat):
+    return v[stat] if isinstance(v, dict) else v
+
+
+def records(raw, hier: str = "kdtree", sample: int = DEFAULT_SAMPLE, eps: float = HAPALA_EPS,
+            stat: str | None = None) -> pd.DataFrame:
+    """Flatten ``calibrate_scene`` outputs to one calibration record per (scene, ray kind):
+    the grid features come from the ``sample`` sampled rays (what the decision algorithm sees);
+    ``t_RG`` (all rays), ``T_BH`` and ``t_RH`` are the measured truth; ``t_RG_s<k>`` every sample
+    size; ``stat`` = "min" (default, :data:`TIME_STAT`) or "median" of the repeated timings."""
+    stat = stat or TIME_STAT
+    rows = []
+    for r in raw:
+        if hier not in r["hier"]:
+            continue
+        for kind, k in r["kinds"].items():
+            s = k["samples"].get(str(sample)) or k["samples"][max(k["samples"], key=int)]
+            row = {"scene": r["scene"], "kind": kind, "N": r["N"], "T_BG": _pick(r["T_BG"], stat),
+                   "t_RG": _pick(k["t_RG"], stat), "t_RG_sample": s.get(f"t_{stat}", s["t"]),
+                   "T_BH": _pick(r["hier"][hier]["T_BH"], stat), "t_RH": _pick(k["hier"][hier]["t_RH"], stat),
+                   "box_frac": s["box_frac"], "hit_frac": s["hit_frac"], "steps": s["steps"], "tests": s["tests"],
+                   "refs_per_tri": r["refs_per_tri"], "rays": k["rays"], "hier": hier,
+                   "calib_seconds": r.get("seconds", np.nan)}
+            row.update({c: r[c] for c in ("sigma", "mean", "sparseness_cells", "sparseness_eq1", "max_refs",
+                                          "skewness", "kurtosis")})
+            row.update({f"t_RG_s{n}": v.get(f"t_{stat}", v["t"]) for n, v in k["samples"].items()})
+            row["R_C"] = exact_rc(row["T_BH"], row["t_RG"], row["t_RH"], eps)
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+# ============================================================ estimators
+def _log2n(N):
+    return np.log2(np.maximum(np.asarray(N, float), 2.0))
+
+
+def _col(X, name, default=np.nan):
+    """Column ``name`` of a DataFrame / mapping of arrays / scalars, as a float array."""
+    if isinstance(X, pd.DataFrame):
+        return X[name].to_numpy(float) if name in X else np.full(len(X), default)
+    if X is None or name not in X:
+        return np.full(np.size(X.get("N", 0)) if X is not None else 1, default, dtype=float)
+    return np.atleast_1d(np.asarray(X[name], float))
+
+
+def as_arrays(frame) -> dict:
+    """A calibration frame as a dict of numpy columns (fast row subsets in the evaluation loops)."""
+    return {c: frame[c].to_numpy() for c in frame.columns} if isinstance(frame, pd.DataFrame) else dict(frame)
+
+
+def subset(X: dict, idx) -> dict:
+    return {k: v[idx] for k, v in X.items()}
+
+
+def _vector(features) -> bool:
+    """True for a table of rows (DataFrame or dict of arrays), False for one scene's mapping."""
+    return isinstance(features, pd.DataFrame) or (features is not None and np.ndim(features.get("N", 0)) >= 1)
+
+
+class HapalaEstimator:
+    """Hapala Eq 7 and Eq 8: T_B^H = N log2 N (1/s) sum T_B^H(i) / (N(i) log2 N(i)) and
+    t_R^H = log2 N (1/s) sum t_R^H(i) / log2 N(i), averaged over the s calibration scenes."""
+
+    form_ = "hapala"
+
+    def fit(self, cal):
+        N = _col(cal, "N")
+        L = _log2n(N)
+        self.k_build_ = float(np.mean(_col(cal, "T_BH") / (N * L)))
+        self.k_ray_ = float(np.mean(_col(cal, "t_RH") / L))
+        self.n_calib_ = len(N)
+        return self
+
+    def predict(self, N, features=None):
+        """(T_BH_est, t_RH_est) for N primitives (``features`` unused)."""
+        N = np.asarray(N, float)
+        L = _log2n(N)
+        T, t = self.k_build_ * N * L, self.k_ray_ * L
+        return (float(T), float(t)) if N.ndim == 0 else (T, t)
+
+
+def _pos_log(v, floor: float = 1e-12):
+    return np.log(np.maximum(np.nan_to_num(np.asarray(v, float), nan=floor), floor))
+
+
+#: log-space features the improved estimator may use; all are known once the grid is built and probed
+FEATURES = {
+    "log N": lambda X: np.log(_col(X, "N")),
+    "log log2 N": lambda X: np.log(_log2n(_col(X, "N"))),
+    "log N log2 N": lambda X: np.log(_col(X, "N") * _log2n(_col(X, "N"))),
+    "log t_G": lambda X: _pos_log(_col(X, "t_RG_sample")),
+    "log tests": lambda X: _pos_log(_col(X, "tests") + 0.1),
+    "log steps": lambda X: _pos_log(_col(X, "steps") + 0.1),
+    "log sigma": lambda X: _pos_log(_col(X, "sigma")),
+    "sparseness": lambda X: np.nan_to_num(_col(X, "sparseness_cells"), nan=0.0),
+}
+#: candidate forms, simplest first: name -> (offset with coefficient 1 or None, fitted features);
+#: every form has a fitted constant and is fitted by least squares on logs (relative errors);
+#: features None = a fixed form without constants
+BUILD_FORMS = {
+    "c N log N": ("log N log2 N", []),
+    "a N^b": (None, ["log N"]),
+    "a N^b sigma^c e^(d sparseness)": (None, ["log N", "log sigma", "sparseness"]),
+    "a N^b steps^c t_G^d": (None, ["log N", "log steps", "log t_G"]),
+}
+RAY_FORMS = {
+    "c log N": ("log log2 N", []),
+    "c t_G": ("log t_G", []),
+    "a t_G^b": (None, ["log t_G"]),
+    "a t_G^b tests^c steps^d": (None, ["log t_G", "log tests", "log steps"]),
+    "a t_G^b tests^c steps^d (log N)^e": (None, ["log t_G", "log tests", "log steps", "log log2 N"]),
+    "a t_G^b tests^c steps^d sigma^e e^(f sparseness)": (None, ["log t_G", "log tests", "log steps", "log sigma",
+                                                                 "sparseness"]),
+}
+#: the grid's own per-ray time from the sample: as sampled (the paper) or corrected for the
+#: sample's cold start, t_G = a t_sample^b
+GRID_FORMS = {"sampled": ("log t_G", None), "a t_sample^b": (None, ["log t_G"]),
+              "a t_sample^b steps^c tests^d": (None, ["log t_G", "log steps", "log tests"])}
+
+
+def _feature(X, name):
+    """Feature ``name`` of X: precomputed (:func:`add_features`) or computed now."""
+    key = "f:" + name
+    return X[key] if isinstance(X, dict) and key in X else FEATURES[name](X)
+
+
+def add_features(X) -> dict:
+    """X as a dict of arrays with every feature precomputed (the evaluation loops fit thousands of times)."""
+    X = as_arrays(X)
+    X.update({"f:" + k: fn(X) for k, fn in FEATURES.items()})
+    return X
+
+
+def _design_log(form, X):
+    off_name, feats = form
+    n = len(_col(X, "N"))
+    off = _feature(X, off_name) if off_name else np.zeros(n)
+    A = np.column_stack([np.ones(n)] + [_feature(X, f) for f in (feats or [])])
+    return A, off
+
+
+def _loo_ols(A, z):
+    """OLS of z on A: (coefficients, leave-one-out residuals r_i / (1 - h_ii); nan if n <= p)."""
+    n, p = A.shape
+    if n >= p:
+        Q, Rm = np.linalg.qr(A)
+        d = np.abs(np.diag(Rm))
+        if d.min() > 1e-9 * max(d.max(), 1e-300):
+            b = np.linalg.solve(Rm, Q.T @ z)
+            if n == p:
+                return b, np.full(n, np.nan)
+            h = (Q * Q).sum(axis=1)
+            return b, (z - A @ b) / np.maximum(1.0 - h, 1e-9)
+    b, *_ = np.linalg.lstsq(A, z, rcond=None)  # rank-deficient: minimum-norm fit, no LOO
+    return b, np.full(n, np.nan)
+
+
+def select_form(forms, X, y, tol: float = 0.10):
+    """Pick the form of ``forms`` (name -> (offset, features), simplest first) for target ``y``:
+    the leave-one-out mean |relative error| of each form (exact, hat matrix, on logs) and the first
+    (simplest) form within ``tol`` (relative) of the best. A form with k fitted exponents needs
+    3k calibration scenes (and the constant-only forms two); with too few for any, the first form.
+    Returns (name, {name: LOO error})."""
+    z = _pos_log(y)
+    table = {}
+    for name, form in forms.items():
+        if form[1] is None:  # a fixed form (no constants): its plain error
+            _, off = _design_log(form, X)
+            table[name] = float(np.mean(np.abs(np.expm1(np.clip(off - z, -50, 50)))))
+            continue
+        A, off = _design_log(form, X)
+        if len(z) < max(2, 3 * (A.shape[1] - 1)) or not np.isfinite(A).all():
+            continue  # as simple as the data allow: >= 3 calibration scenes per fitted exponent
+        _, loo = _loo_ols(A, z - off)
+        if np.isfinite(loo).all():
+            table[name] = float(np.mean(np.abs(np.expm1(np.clip(-loo, -50, 50)))))  # estimate / truth - 1
+    if not table:
+        return next(iter(forms)), table
+    best = min(table.values())
+    return next(n for n in forms if n in table and table[n] <= best * (1 + tol) + 1e-12), table
+
+
+class _LogForm:
+    """One fitted log-linear form: log y = offset + A b."""
+
+    def __init__(self, forms, name):
+        self.forms, self.name = forms, name
+
+    def fit(self, X, y):
+        form = self.forms[self.name]
+        if form[1] is None:
+            self.coef_ = np.zeros(0)
+            return self
+        A, off = _design_log(form, X)
+        self.coef_, _ = _loo_ols(A, _pos_log(y) - off)
+        return self
+
+    def predict(self, X):
+        A, off = _design_log(self.forms[self.name], X)
+        return np.exp(off + (A @ self.coef_ if len(self.coef_) else 0.0))
+
+
+class GridcostEstimator:
+    """T_B^H, t_R^H (and the grid's own t_R^G) from what gridcost knows once the grid is built and
+    probed: N, the sampled per-ray grid time, the sampled counters (cells stepped, triangles tested)
+    and Havran's statistics. Each quantity has a few candidate log-linear forms (:data:`BUILD_FORMS`,
+    :data:`RAY_FORMS`, :data:`GRID_FORMS`), fitted by least squares on logs over the calibration
+    scenes; with form "auto" the form is chosen by exact leave-one-out cross-validation over the
+    calibration scenes, keeping the simplest form within ``tol`` of the best (:func:`select_form`)."""
+
+    def __init__(self, build_form: str = "auto", ray_form: str = "auto", grid_form: str = "auto",
+                 tol: float = 0.10):
+        self.build_form, self.ray_form, self.grid_form, self.tol = build_form, ray_form, grid_form, tol
+
+    def _choose(self, forms, want, X, y):
+        if want != "auto":
+            return want, {}
+        return select_form(forms, X, y, self.tol)
+
+    def fit(self, cal):
+        cal = as_arrays(cal)
+        yb, yr, yg = (_col(cal, c) for c in ("T_BH", "t_RH", "t_RG"))
+        self.build_form_, self.build_cv_ = self._choose(BUILD_FORMS, self.build_form, cal, yb)
+        self.ray_form_, self.ray_cv_ = self._choose(RAY_FORMS, self.ray_form, cal, yr)
+        self.grid_form_, self.grid_cv_ = self._choose(GRID_FORMS, self.grid_form, cal, yg)
+        self.build_ = _LogForm(BUILD_FORMS, self.build_form_).fit(cal, yb)
+        self.ray_ = _LogForm(RAY_FORMS, self.ray_form_).fit(cal, yr)
+        self.grid_ = _LogForm(GRID_FORMS, self.grid_form_).fit(cal, yg)
+        self.form_ = f"T_BH = {self.build_form_}; t_RH = {self.ray_form_}; t_RG = {self.grid_form_}"
+        self.n_calib_ = len(yb)
+        return self
+
+    @staticmethod
+    def _frame(N, features):
+        if _vector(features):
+            return features, False
+        return {**(features or {}), "N": N}, np.ndim(N) == 0
+
+    def predict(self, N, features=None):
+        """(T_BH_est, t_RH_est) for N primitives and the grid ``features`` (mapping or DataFrame)."""
+        X, scalar = self._frame(N, features)
+        T, t = self.build_.predict(X), self.ray_.predict(X)
+        return (float(T[0]), float(t[0])) if scalar else (T, t)
+
+    def predict_grid(self, features):
+        """t_R^G estimated from the sampled per-ray time (corrected when the calibration says so)."""
+        t = self.grid_.predict(features)
+        return t if _vector(features) else float(t[0])
+
+
+def grid_time(estimator, features):
+    """t_R^G the decision uses: the estimator's correction of the sample, else the sample itself."""
+    if hasattr(estimator, "predict_grid"):
+        return estimator.predict_grid(features)
+    t = _col(features, "t_RG_sample")
+    return t if _vector(features) else float(t[0])
+
+
+def estimate_rc(estimator, frame, eps: float = HAPALA_EPS):
+    """R_est for every row of ``frame`` as the decision algorithm sees it (sampled t_R^G)."""
+    T, t = estimator.predict(_col(frame, "N"), frame)
+    return exact_rc(T, grid_time(estimator, frame), t, eps)
+
+
+# ============================================================ the decision algorithm (Sec 3)
+def decide_rule(t_RG, T_BH, t_RH, n_rays, eps: float = HAPALA_EPS) -> tuple[str, float, int]:
+    """Steps 5-8 on (estimated) times: ("grid" | "hier", R_C, the step that decided).
+
+    Step 5: t_R^H >= t_R^G -> grid. Step 6: R_C = T_B^H / (t_R^G (1 + eps) - t_R^H). Step 7 as
+    printed reads "If R_C <= R use uniform grids", which contradicts the paper's own analysis ("for
+    the number of rays ... between 0 and R_C it does not pay off to build up a hierarchical data
+    structure"); the logically correct rule is implemented: R <= R_C -> keep the grid (step 7),
+    otherwise build the hierarchy (step 8)."""
+    if t_RH >= t_RG:
+        return "grid", float("inf"), 5
+    rc = exact_rc(T_BH, t_RG, t_RH, eps)
+    return ("grid", rc, 7) if n_rays <= rc else ("hier", rc, 8)
+
+
+class Selector:
+    """Hapala's decision algorithm: calibrate once (``fit`` on calibration records of one ray kind),
+    then for a new scene build the grid, sample t_R^G on ``sample_rays`` rays, estimate T_B^H and
+    t_R^H with ``estimator`` (default :class:`HapalaEstimator`) and keep the grid or build the
+    hierarchy (``hier``, default the kd-tree) for ``n_rays`` rays (:func:`decide_rule`)."""
+
+    def __init__(self, estimator=None, eps: float = HAPALA_EPS, sample_rays: int = DEFAULT_SAMPLE,
+                 kind: str = "random", grid_factor: float = GRID_FACTOR, hier: str = "kdtree", seed: int = 0):
+        self.estimator, self.eps, self.sample_rays, self.kind = estimator, eps, sample_rays, kind
+        self.grid_factor, self.hier, self.seed = grid_factor, hier, seed
+
+    def fit(self, calibration: pd.DataFrame):
+        cal = calibration
+        if "kind" in cal and (cal["kind"] == self.kind).any():
+            cal = cal[cal["kind"] == self.kind]
+        if "hier" in cal and (cal["hier"] == self.hier).any():
+            cal = cal[cal["hier"] == self.hier]
+        import copy
+        self.estimator_ = copy.deepcopy(self.estimator) if self.estimator is not None else HapalaEstimator()
+        self.estimator_.fit(cal.reset_index(drop=True))
+        self.n_calib_ = len(cal)
+        return self
+
+    def decide_features(self, features: dict, n_rays: float) -> dict:
+        """Steps 3-8 for a grid already built and probed: ``features`` holds N, T_BG, t_RG_sample and
+        the sampled counters (box_frac, hit_frac, steps, tests, refs_per_tri, Havran statistics)."""
+        T_BH, t_RH = self.estimator_.predict(features["N"], features)
+        t_RG = float(grid_time(self.estimator_, features))
+        choice, rc, step = decide_rule(t_RG, T_BH, t_RH, n_rays, self.eps)
+        return {"choice": "grid" if choice == "grid" else self.hier, "rc_est": rc, "t_grid": t_RG,
+                "t_grid_sampled": float(features["t_RG_sample"]),
+                "t_hier": float(t_RH), "t_build_hier": float(T_BH), "t_build_grid": float(features.get("T_BG", np.nan)),
+                "step": step, "n_rays": n_rays, "N": int(features["N"]), "estimator": getattr(self.estimator_, "form_", "")}
+
+    def probe(self, scene, rays=None) -> tuple[object, dict]:
+        """Steps 1-2: build the grid (timed) and sample its per-ray time; returns (grid, features)."""
+        from tracer.accel import build
+        from tracer.rays import make_rays
+        from tracer.scene import Scene
+        build(Scene(scene.tris[:1], "warm-up"), "grid")  # load the compiled kernels outside the timing
+        with single_thread():
+            t0 = time.thread_time()
+            grid = build(scene, "grid", factor=self.grid_factor)
+            t_build = time.thread_time() - t0
+        if rays is None:
+            rays = make_rays(scene, self.kind, self.sample_rays, seed=self.seed)
+        p = probe_grid(grid, rays, sample=min(self.sample_rays, rays.n), seed=self.seed)
+        st = grid.stats()
+        feats = {"N": scene.n, "T_BG": t_build, "t_RG_sample": p["t"], "box_frac": p["box_frac"],
+                 "hit_frac": p["hit_frac"], "steps": p["steps"], "tests": p["tests"],
+                 "refs_per_tri": st["refs_per_tri"], **havran_stats(grid)}
+        return grid, feats
+
+    def decide(self, scene, n_rays: float, rays=None) -> dict:
+        """The 8 steps for ``scene`` and ``n_rays`` rays: a dict with ``choice`` ("grid" or the
+        hierarchy), ``rc_est``, ``t_grid`` (sampled t_R^G), ``t_hier`` (estimated t_R^H),
+        ``t_build_hier`` (estimated T_B^H), ``t_build_grid`` (measured T_B^G), all in seconds."""
+        _, feats = self.probe(scene, rays)
+        out = self.decide_features(feats, n_rays)
+        out["scene"] = scene.name
+        return out
+
+
+# ============================================================ evaluation (Sec 4)
+#: ray budgets of the decision-quality evaluation: 10^3 ... 10^9, 4 per decade
+R_VALUES = np.logspace(3, 9, 25)
+
+
+def total_times(frame, R):
+    """True total time (s) of keeping the grid and of building the hierarchy for R rays (rows x R):
+    T_B^G + R t_R^G, and T_B^G + T_B^H + R t_R^H (the grid is built either way)."""
+    R = np.asarray(R, float)[None, :]
+    c = {k: _col(frame, k)[:, None] for k in ("T_BG", "t_RG", "T_BH", "t_RH")}
+    return c["T_BG"] + R * c["t_RG"], c["T_BG"] + c["T_BH"] + R * c["t_RH"]
+
+
+def decision_quality(frame: pd.DataFrame, r_est, R=R_VALUES) -> dict:
+    """Picks of "grid iff R <= R_est" against the oracle (the faster of the two true totals):
+    correct-pick fraction and time lost (mean of per-pair % and total % over all pairs)."""
+    tg, th = total_times(frame, R)
+    pick_grid = np.asarray(R)[None, :] <= np.asarray(r_est, float)[:, None]
+    chosen = np.where(pick_grid, tg, th)
+    best = np.minimum(tg, th)
+    lost = chosen / best - 1.0
+    return {"correct": float(np.mean(lost <= 1e-12)), "lost_mean_pct": 100 * float(lost.mean()),
+            "lost_total_pct": 100 * float(chosen.sum() / best.sum() - 1), "lost_max_pct": 100 * float(lost.max()),
+            "pairs": int(lost.size), "correct_n": int((lost <= 1e-12).sum())}
+
+
+def evaluate(cal: pd.DataFrame, make_estimator, C_values=None, n_splits: int = 200, seed: int = 0,
+             eps: float = HAPALA_EPS, R=R_VALUES, keep_errors: bool = False) -> pd.DataFrame:
+    """The paper's protocol for one ray kind: for each C, ``n_splits`` random splits of the S scenes
+    into C calibration and S - C evaluation scenes; fit ``make_estimator()`` on the calibration
+    scenes, estimate R_est for the others (decision algorithm: sampled t_R^G), Err against the exact
+    R_C (evaluation scenes with finite R_C), and the picks over the ray budgets ``R``.
+    One row per C: mean Err, mean |Err|, median |Err|, capped fraction, correct picks, time lost."""
+    cal = add_features(cal)
+    S = len(cal["N"])
+    C_values = list(C_values or range(1, S))
+    rng = np.random.default_rng(seed)
+    rc_true = _col(cal, "R_C")
+    tg, th = total_times(cal, R)
+    best = np.minimum(tg, th)
+    rows = []
+    for C in C_values:
+        errs, lost, chosen_sum, best_sum, forms = [], [], 0.0, 0.0, {}
+        for _ in range(n_splits):
+            p = rng.permutation(S)
+            ci, ei = p[:C], p[C:]
+            est = make_estimator().fit(subset(cal, ci))
+            forms[getattr(est, "form_", "")] = forms.get(getattr(est, "form_", ""), 0) + 1
+            ev = subset(cal, ei)
+            r_est = estimate_rc(est, ev, eps)
+            e = rc_error(r_est, rc_true[ei])
+            errs.append(e[np.isfinite(e)])
+            pick_grid = np.asarray(R)[None, :] <= np.asarray(r_est)[:, None]
+            ch = np.where(pick_grid, tg[ei], th[ei])
+            lost.append((ch / best[ei] - 1.0).ravel())
+            chosen_sum += ch.sum()
+            best_sum += best[ei].sum()
+        e = np.concatenate(errs) if errs else np.zeros(0)
+        lo = np.concatenate(lost)
+        row = {"C": C, "splits": n_splits, "n_err": int(e.size),
+               "mean_err": float(e.mean()) if e.size else np.nan, "mean_abs_err": float(np.abs(e).mean()) if e.size else np.nan,
+               "median_abs_err": float(np.median(np.abs(e))) if e.size else np.nan,
+               "capped_frac": float((e >= ERR_CAP).mean()) if e.size else np.nan,
+               "correct": float((lo <= 1e-12).mean()), "lost_mean_pct": 100 * float(lo.mean()),
+               "lost_total_pct": 100 * (chosen_sum / best_sum - 1), "top_form": max(forms, key=forms.get)}
+        if keep_errors:
+            row["errors"] = e
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def loo_errors(cal: pd.DataFrame, make_estimator, eps: float = HAPALA_EPS) -> pd.DataFrame:
+    """Leave-one-scene-out (C = S - 1): each scene's R_est from an estimator fitted on all others."""
+    cal = cal.reset_index(drop=True)
+    out = []
+    for i in range(len(cal)):
+        est = make_estimator().fit(cal.drop(index=i))
+        row = cal.iloc[[i]]
+        T, t = est.predict(row["N"].to_numpy(float), row)
+        r = exact_rc(T, grid_time(est, row), t, eps)
+        out.append({"scene": row["scene"].iloc[0], "N": int(row["N"].iloc[0]), "R_C": float(row["R_C"].iloc[0]),
+                    "R_est": float(np.asarray(r).ravel()[0]), "T_BH": float(row["T_BH"].iloc[0]),
+                    "T_BH_est": float(np.ravel(T)[0]), "t_RH": float(row["t_RH"].iloc[0]), "t_RH_est": float(np.ravel(t)[0]),
+                    "t_RG": float(row["t_RG"].iloc[0]), "t_RG_sample": float(row["t_RG_sample"].iloc[0]),
+                    "t_RG_est": float(np.ravel(grid_time(est, row))[0]),
+                    "form": getattr(est, "form_", "")})
+    df = pd.DataFrame(out)
+    df["err"] = rc_error(df["R_est"], df["R_C"])
+    return df
