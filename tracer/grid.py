@@ -118,7 +118,7 @@ def _block_exit(o, d, lo, bsize, b):
 
 @jit
 def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
-             cell_start, tri_ids, tv, mb, chunk, macro, mshift):
+             cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
 
     Returns (t, tri_id, setups, steps, tests, skips, jumps). ``mb`` is the (chunks, MAILBOX) mailbox
@@ -163,7 +163,16 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                     continue
         c = np.uintp(ix + nx * (iy + ny * iz))
         steps += 1
-        for r in range(cell_start[c], cell_start[c + np.uintp(1)]):
+        if occ is None:
+            r0 = cell_start[c]
+            r1 = cell_start[c + np.uintp(1)]
+        else:
+            r0 = 0
+            r1 = 0
+            if (occ[c >> np.uintp(3)] >> (c & np.uintp(7))) & 1:
+                r0 = cell_start[c]
+                r1 = cell_start[c + np.uintp(1)]
+        for r in range(r0, r1):
             ru = np.uintp(r)
             tid = tri_ids[ru]
             if mb is not None:
@@ -219,7 +228,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
 
 @pjit
 def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
-               out_t, out_id, counters, mb, macro, mshift):
+               out_t, out_id, counters, mb, macro, mshift, occ):
     """Batched grid traversal, ``prange`` over chunks of CHUNK rays. ``counters`` and ``mb`` are
     arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
     m = O.shape[0]
@@ -229,7 +238,7 @@ def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv
             t, tid, su, st, te, sk, ju = grid_ray(
                 np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                 np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
-                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch, macro, mshift)
+                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch, macro, mshift, occ)
             out_t[i] = t
             out_id[i] = tid
             if counters is not None:
@@ -307,6 +316,7 @@ class UniformGrid(Accel):
         self.cell_start_ = cell_start.astype(np.int32)
         self.tri_ids_ = tri_ids
         self.tri_verts_ = np.ascontiguousarray(scene.tris.reshape(-1, 9)[tri_ids])
+        self.occ_ = np.packbits(np.diff(self.cell_start_) > 0, bitorder="little")
         self.mshift_ = int(self.macro).bit_length() - 1 if self.macro else 0
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start
@@ -320,7 +330,7 @@ class UniformGrid(Accel):
         mb = np.empty(((m + CHUNK - 1) // CHUNK, MAILBOX), np.int32) if self.mailbox else None
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
-                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_)
+                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
@@ -330,7 +340,8 @@ class UniformGrid(Accel):
             "structure": "grid", "res": [int(r) for r in self.res_], "cells": ncell,
             "refs": int(self.refs_), "refs_per_tri": self.refs_ / max(self.n_, 1),
             "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
-            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
+            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
+                                + self.occ_.nbytes),
             "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,
             "macro": self.macro,
         }
