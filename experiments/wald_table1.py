@@ -1,0 +1,160 @@
+"""``wald-table1``: Wald et al. 2006 Table 1 — ray-triangle intersection tests of 4 x 4 frustum-grid
+packets with neither mailboxing nor frustum culling (n/n), with mailboxing (y/n), and with both
+(y/y). The paper: mailboxing alone cuts tests by up to 2x, culling another 4-9x, both together
+8.5-14x, to about what a packet kd-tree does.
+
+All three counts come from one counting traversal per scene (mailboxing and culling never change
+the hits, so they never change which cells the packet visits): every reference met (n/n), the
+first meeting of each triangle per packet (y/n), and those not rejected by the frustum (y/y) — each
+times the rays in the packet. Grid as in the paper: lambda = 5, triangles inserted by bounding box.
+Beside: the single-ray kd-tree of :mod:`tracer.kdtree` (tests per ray) where the paper lists its
+4 x 4 OpenRT kd-tree. Camera rays in 4 x 4 tile order at 1024 x 1024 (the paper's resolution).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from experiments.results import atomic_write, save_figure, write_csv, write_meta
+from tracer.packet import CoherentGrid
+from tracer.rays import camera_rays
+from tracer.scene import load_scene
+from tracer.timing import set_threads
+
+#: our scene, the paper's scene it stands in for, paper #tris, n/n, y/n, y/y (millions), kd-tree
+PAPER = [
+    ("bunny-69k", "ben", 78_000, 12.8, 6.0, 1.5, 1.1),
+    ("bunny-16k", "hand", 15_000, 12.5, 6.0, 0.93, 0.85),
+    ("dragon-11k", "toys", 11_000, 14.0, 8.7, 1.0, 0.82),
+    ("room", "conf", 274_000, 96.0, 53.9, 6.9, 3.7),
+]
+QUICK_SCENES = ["bunny-948", "dragon-11k"]
+PAPER_RAYS = 1024 * 1024
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the four stand-ins)")
+    p.add_argument("--side", type=int, default=None, help="image side (default 1024; --quick 128)")
+    p.add_argument("--packet", type=int, default=4, help="packet size k (the paper: 4)")
+    p.add_argument("--exact", action="store_true", help="exact triangle/cell insertion instead of bounding boxes")
+    p.add_argument("--no-kdtree", action="store_true", help="skip the single-ray kd-tree column")
+
+
+def count_tests(scene, side: int, k: int, exact: bool, lam: float = 5.0, macro: int = 6) -> dict:
+    """Per-ray work of one counting traversal with k x k packets (shared with wald-table4)."""
+    rays = camera_rays(scene, side, side, tile=k)
+    cgt = CoherentGrid(packet=k, lam=lam, exact=exact, macro=macro).build(scene)
+    pc = cgt.packet_counters(rays.origins, rays.directions)
+    n = rays.n
+    row = {"scene": scene.name, "N": scene.n, "packet": k, "side": side, "rays": n, "exact": exact,
+           "res": "x".join(str(v) for v in cgt.res_), "refs_per_tri": cgt.refs_ / scene.n,
+           "hits": float((pc["hits"].tri_id >= 0).mean()), "single_frac": pc["single"].sum() / n}
+    for c in ("slices", "cells", "considered", "tests_plain", "tests_mb", "tests_mb_fc", "culled"):
+        row[c] = pc[c].sum() / n
+    return row
+
+
+def kdtree_tests(scene, side: int) -> float:
+    from tracer.kdtree import KdTree
+    rays = camera_rays(scene, side, side, tile=1)
+    _, cnt = KdTree().build(scene).intersect(rays.origins, rays.directions)
+    return float(cnt["tests"].mean())
+
+
+def run(args, log=print) -> dict:
+    started = time.time()
+    threads = set_threads(args.threads)
+    quick = args.quick
+    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER])
+    side = args.side or (128 if quick else 1024)
+    out_dir = Path(args.out) / "wald-table1"
+    paper = {p[0]: p for p in PAPER}
+    rows = []
+    for name in names:
+        scene = load_scene(name)
+        row = count_tests(scene, side, args.packet, args.exact)
+        if not args.no_kdtree:
+            row["kdtree_tests"] = kdtree_tests(scene, min(side, 256 if not quick else side))
+        p = paper.get(name)
+        if p:
+            row.update({"paper_scene": p[1], "paper_N": p[2], "paper_nn": p[3], "paper_yn": p[4], "paper_yy": p[5],
+                        "paper_kd": p[6]})
+        rows.append(row)
+        log(f"  {name}: n/n {row['tests_plain']:.1f}, y/n {row['tests_mb']:.1f}, y/y {row['tests_mb_fc']:.2f} tests/ray")
+    df = pd.DataFrame(rows)
+    df["mb_factor"] = df.tests_plain / df.tests_mb
+    df["fc_factor"] = df.tests_mb / df.tests_mb_fc
+    df["total_factor"] = df.tests_plain / df.tests_mb_fc
+    if "paper_nn" in df:
+        df["paper_mb_factor"] = df.paper_nn / df.paper_yn
+        df["paper_fc_factor"] = df.paper_yn / df.paper_yy
+        df["paper_total_factor"] = df.paper_nn / df.paper_yy
+    write_csv(out_dir / "table1.csv", df)
+    md = _summary(df, side, args.packet, args.exact)
+    atomic_write(out_dir / "summary.md", md)
+    _figure(df)
+    write_meta(out_dir, "wald-table1", started, threads=threads, side=side, packet=args.packet, exact=args.exact,
+               scenes=names, quick=quick)
+    log(md)
+    return {"table": df}
+
+
+def _f(v, fmt="{:.1f}"):
+    return "–" if v is None or (isinstance(v, float) and np.isnan(v)) else fmt.format(v)
+
+
+def _summary(df, side, k, exact) -> str:
+    scale = side * side / 1e6
+    lines = [f"# Table 1 (Wald et al. 2006): ray-triangle tests, {k}x{k} packets, mailboxing (MB) and frustum culling (FC)",
+             "", f"Camera rays {side}x{side}; grid lambda = 5, {'exact' if exact else 'bounding-box'} insertion. Tests "
+             f"per ray (millions per {side}² frame in brackets); the paper's numbers are millions per 1024² frame.", "",
+             "| scene (paper's) | N | n/n | y/n | y/y | MB factor ours (paper) | FC factor ours (paper) | "
+             "n/n to y/y ours (paper) | kd-tree tests/ray ours (paper, M) |", "|---|---|---|---|---|---|---|---|---|"]
+    for _, r in df.iterrows():
+        ps = r.get("paper_scene")
+        lines.append(
+            f"| {r.scene}{f' ({ps})' if isinstance(ps, str) else ''} | {r.N:,} | {r.tests_plain:.1f} ({r.tests_plain * scale:.1f}) | "
+            f"{r.tests_mb:.1f} ({r.tests_mb * scale:.1f}) | {r.tests_mb_fc:.2f} ({r.tests_mb_fc * scale:.2f}) | "
+            f"{r.mb_factor:.2f} ({_f(r.get('paper_mb_factor'), '{:.2f}')}) | {r.fc_factor:.2f} ({_f(r.get('paper_fc_factor'), '{:.2f}')}) | "
+            f"{r.total_factor:.1f} ({_f(r.get('paper_total_factor'))}) | {_f(r.get('kdtree_tests'), '{:.2f}')} "
+            f"({_f(r.get('paper_kd'), '{:.2f}')}) |")
+    lines += ["", "## Reading", "",
+              "Paper: MB alone up to 2x, FC on top 4-9x, together 8.5-14x. Ours: MB "
+              f"{df.mb_factor.min():.2f}-{df.mb_factor.max():.2f}x, FC on top {df.fc_factor.min():.1f}-{df.fc_factor.max():.1f}x, "
+              f"together {df.total_factor.min():.1f}-{df.total_factor.max():.1f}x. "
+              "Our culling rejects a triangle when its vertices lie outside one frustum plane (any packet) or when the "
+              "four corner rays miss it on one edge (Dmitriev's test, common origin, triangles wider than a cell). "
+              + (f"Packets of {k}x{k} at {side}² cover {(1024 / side) ** 2:g}x the scene area of the paper's at 1024², "
+                 "which raises n/n and the mailboxing factor. " if side != 1024 else "")
+              + "Views differ from the paper's (ours: a camera framing the bounding sphere from outside; the room is "
+              "seen through its walls, where the paper looks around inside the conference room). The kd-tree column is our single-ray SAH kd-tree (the paper's is a 4x4 packet kd-tree in OpenRT), "
+              "given per ray; the paper's in millions per frame (about per ray at 1024²)."]
+    return "\n".join(lines) + "\n"
+
+
+def _figure(df):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.5, 3.0))
+    x = np.arange(len(df))
+    for j, (col, lab) in enumerate((("tests_plain", "n/n"), ("tests_mb", "MB"), ("tests_mb_fc", "MB + FC"))):
+        ax.bar(x + (j - 1) * 0.27, df[col], 0.27, label=f"ours {lab}")
+    if "paper_nn" in df:
+        for j, col in enumerate(("paper_nn", "paper_yn", "paper_yy")):
+            ax.plot(x + (j - 1) * 0.27, df[col], "k_", ms=10, label="paper (M per 1024² frame)" if j == 0 else None)
+    ax.set_yscale("log")
+    ax.set_xticks(x, df.scene, fontsize=7)
+    ax.set_ylabel("ray-triangle tests per ray")
+    ax.legend(fontsize=6)
+    fig.tight_layout()
+    save_figure(fig, "wald-table1")
+    plt.close(fig)
+
+
+def main(args) -> int:
+    run(args, log=(lambda *a: None) if args.json else print)
+    return 0
