@@ -109,9 +109,10 @@ def _summary(df, best, cross, cross_pred, fit, side, repeats, threads, lam) -> s
               "2x2 gains little, 32x32 deteriorates quickly as the model grows. Ours is at "
               f"{side}² pixels — {(1024 / side) ** 2:g}x fewer rays per area, so a k x k packet's frustum covers as much of "
               f"the model as a {1024 // side}k x {1024 // side}k packet of the paper's; the paper notes that the optimal size "
-              "grows with screen resolution, so the crossover moves to smaller models here. Packets whose rays spread too much for a frustum "
-              f"(share of rays traced on their own: {single}) fall back to single rays and are left out of the cost-model "
-              "fit; 1x1 'packets' pay a frustum set-up and slice walk for one ray."]
+              "grows with screen resolution, so the crossover moves to smaller models here. Rays of packets too "
+              f"incoherent for a frustum fall back to single-ray traversal (share of the rays meeting the grid: {single}); "
+              "points with over half are left out of the cost-model fit. 1x1 'packets' pay a frustum set-up and slice "
+              "walk for one ray."]
     return "\n".join(lines) + "\n"
 
 

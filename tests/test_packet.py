@@ -139,3 +139,20 @@ def test_packet_cost_fit_recovers_constants():
     i = int(np.argmin(X @ true))
     assert (best["packet"], best["lam"]) == (df.packet[i], df.lam[i])
     assert len(table) == len(df)
+
+
+def test_packet_cost_fit_ray_term_and_shares():
+    rng = np.random.default_rng(1)
+    ks = np.repeat([1, 2, 4, 8, 16], 4)
+    X = np.column_stack([1.0 / ks**2, 8.0 / ks, 20.0 / ks + rng.random(len(ks)), 2 + ks * rng.random(len(ks))])
+    true = np.array([300.0, 20.0, 8.0, 1.5, 25.0])  # ... and 25 ns per ray
+    y = np.column_stack([X, np.ones(len(X))]) @ true
+    fit = PacketCostFit(ray_term=True, n_boot=50).fit(X, y)
+    np.testing.assert_allclose(fit.coef_, true, rtol=1e-6)
+    assert fit.t_ray_ == pytest.approx(25.0)
+    shares = fit.shares(X)
+    assert set(shares) == {"t_setup", "t_slice", "t_cell", "t_test", "t_ray"}
+    assert sum(shares.values()) == pytest.approx(1.0)
+    assert fit.packet_time(0, 0, 0) == pytest.approx(300.0)
+    with pytest.raises(ValueError):
+        PacketCostFit().fit(X[:, :3], y)

@@ -282,7 +282,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
             nan = (xa != xa) | (xb != xb) | (ya != ya) | (yb != yb) | (za != za) | (zb != zb)
             W[_C0, q] = np.nan if nan else t0
             W[_C1, q] = t1
-            inbox += not (t0 > t1)  # NaN (a zero direction on a slab plane) counts as inside
+            inbox += nan or not (t0 > t1)  # NaN (a zero direction on a slab plane) counts as inside
             out_t[i] = np.float32(INF)
             out_id[i] = -1
         if inbox == 0 and pc is None:
@@ -313,7 +313,8 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
             ox = np.float64(O[i, 0]); oy = np.float64(O[i, 1]); oz = np.float64(O[i, 2])
             dx = np.float64(D[i, 0]); dy = np.float64(D[i, 1]); dz = np.float64(D[i, 2])
             if not (t0 <= t1):  # NaN from a zero direction: the careful slab test
-                t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, np.float64(tmax[i]))
+                t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin,
+                                 np.float64(tmax[i]))
             if t0 > t1:
                 continue
             o3 = (ox, oy, oz)
