@@ -83,9 +83,13 @@ def test_bad_mesh_exit_2_in_process(case, bad_meshes, capsys):
     assert any(c.lower() in lines[0].lower() for c in causes), lines[0]
 
 
-def test_bench_bad_mesh_exit_2(bad_meshes, run_cli, cli_error):
-    path, _ = bad_meshes["nan-vertex"]
-    cli_error(run_cli("bench", "--mesh", str(path), "--rays", "10", "--repeats", "1", "--structures", "grid"), path)
+def test_bench_bad_mesh_exit_2(bad_meshes, run_cli, cli_error, tmp_path):
+    path, causes = bad_meshes["nan-vertex"]
+    out = tmp_path / "out"
+    line = cli_error(run_cli("bench", "--mesh", str(path), "--rays", "10", "--repeats", "1", "--structures", "grid",
+                             "--out", str(out)), path)
+    assert any(c.lower() in line.lower() for c in causes), line
+    assert not out.exists() or not any(out.rglob("*")), "bad input must leave nothing written"
 
 
 BAD_ARGS = [
