@@ -104,6 +104,22 @@ class Accel:
                 np.zeros((m, len(COUNTER_NAMES)), np.int32) if count else None)
 
 
+class TreeTraceMixin:
+    """``_trace`` shared by the hierarchies (kd-tree, BVH): same flat arrays, same kernel signature;
+    a subclass sets ``_kernel = staticmethod(<its Numba kernel>)``."""
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        out_t, out_id, cnt = self._outputs(len(o), count)
+        if self.n_ == 0:
+            out_t[:] = np.inf
+            out_id[:] = -1
+            return out_t, out_id, cnt
+        self._kernel(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
+                     self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
+                     out_t, out_id, cnt)
+        return out_t, out_id, cnt
+
+
 def build(scene, name: str = "grid", **params) -> Accel:
     """Build structure ``name`` (one of :data:`STRUCTURES`) over ``scene`` with ``params``."""
     if name not in STRUCTURES:

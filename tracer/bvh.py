@@ -29,7 +29,7 @@ import numpy as np
 from numba import prange
 
 from tracer._jit import jit, pjit
-from tracer.accel import COUNTER_NAMES, Accel
+from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.kdtree import root_box
@@ -340,9 +340,11 @@ def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size, 
                   tv, ids, stack_size, out_t, out_id, counters)
 
 
-class BVH(Accel):
+class BVH(TreeTraceMixin, Accel):
     """Binned-SAH BVH. Parameters: ``bins`` (32), ``max_leaf`` triangles per leaf (4),
     ``trav_cost`` relative to one triangle test (pbrt-v2: 1/8)."""
+
+    _kernel = staticmethod(bvh_trace)
 
     name = "bvh"
 
@@ -388,18 +390,6 @@ class BVH(Accel):
         self.sah_ = {"exp_inner": s_inner / ra, "exp_tests": s_tests / ra}
         self.scene_name_ = scene.name
         return self
-
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        m = len(o)
-        out_t, out_id, cnt = self._outputs(m, count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        bvh_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                  self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
-                  out_t, out_id, cnt)
-        return out_t, out_id, cnt
 
     def stats(self) -> dict:
         nn = len(self.nodes_)

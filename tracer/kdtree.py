@@ -45,7 +45,7 @@ import numpy as np
 from numba import prange
 
 from tracer._jit import jit, pjit
-from tracer.accel import COUNTER_NAMES, Accel
+from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
 from tracer.errors import GridcostError
@@ -516,10 +516,12 @@ def root_box(scene) -> np.ndarray:
     return np.concatenate([lo - pad, hi + pad])
 
 
-class KdTree(Accel):
+class KdTree(TreeTraceMixin, Accel):
     """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
     ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
     round(8 + 1.3 floor(log2 N)))."""
+
+    _kernel = staticmethod(kd_trace)
 
     name = "kdtree"
 
@@ -576,18 +578,6 @@ class KdTree(Accel):
         self.sah_ = {"exp_inner": s_inner / ra, "exp_leaves": s_leaf / ra, "exp_tests": s_tests / ra}
         self.scene_name_ = scene.name
         return self
-
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        m = len(o)
-        out_t, out_id, cnt = self._outputs(m, count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                 self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
-                 out_t, out_id, cnt)
-        return out_t, out_id, cnt
 
     def stats(self) -> dict:
         nn = self.logical_nodes_
