@@ -165,11 +165,12 @@ def _dda_axis(o, d, t, lo, cell, inv_cell, n):
         i = 0
     elif i > n - 1:
         i = n - 1
+    if d == 0.0:
+        return i, 0, INF, INF
+    inv = 1.0 / d  # the same expression as in _slab: inlined together, LLVM computes it once
     if d > 0.0:
-        return i, 1, (lo + (i + 1) * cell - o) / d, cell / d
-    if d < 0.0:
-        return i, -1, (lo + i * cell - o) / d, -cell / d
-    return i, 0, INF, INF
+        return i, 1, (lo + (i + 1) * cell - o) * inv, cell * inv
+    return i, -1, (lo + i * cell - o) * inv, -cell * inv
 
 
 @jit(inline="always")

@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 import time
 
+import numba
 import numpy as np
-from numba import prange
+from numba import get_thread_id, prange
 
 from tracer._jit import jit, pjit
 from tracer.accel import COUNTER_NAMES, Accel
@@ -20,9 +21,7 @@ from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_setup, ray_box, ray_triangle, tri_box_overlap
 from tracer.memory import check_budget
 
-#: rays per parallel chunk (each chunk owns one mailbox)
-CHUNK = 64
-#: direct-mapped mailbox entries per chunk (power of two)
+#: direct-mapped mailbox entries per thread (power of two)
 MAILBOX = 32
 #: relative enlargement of cells in the overlap test, so rounding never drops a touching triangle
 CELL_EPS = 1e-5
@@ -116,7 +115,7 @@ def _block_exit(o, d, lo, bsize, b):
     return INF
 
 
-@jit
+@jit(inline="always")
 def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
              cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
@@ -134,8 +133,19 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
     if mb is not None:
         for h in range(MAILBOX):
             mb[chunk, h] = -1
+    # the cell index moves by a signed stride per axis; l* counts the cells left before the ray
+    # leaves the grid on that axis (replaces two bounds checks and the index multiply per step)
+    nxy = nx * ny
+    c = ix + nx * iy + nxy * iz
+    lx = nx - 1 - ix if sx > 0 else ix
+    ly = ny - 1 - iy if sy > 0 else iy
+    lz = nz - 1 - iz if sz > 0 else iz
+    cdx = sx
+    cdy = sy * nx
+    cdz = sz * nxy
+    # best starts at tmax: leaving a cell at t >= best (hit found, or beyond tmax) ends the ray
     best = np.float64(tmax)
-    best_id = -1
+    best_ref = -1
     steps = 0
     tests = 0
     skips = 0
@@ -160,22 +170,26 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
                         ox, oy, oz, dx, dy, dz, te, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
                         gp[6], gp[7], gp[8], nx, ny, nz)
+                    c = ix + nx * iy + nxy * iz
+                    lx = nx - 1 - ix if sx > 0 else ix
+                    ly = ny - 1 - iy if sy > 0 else iy
+                    lz = nz - 1 - iz if sz > 0 else iz
                     continue
-        c = np.uintp(ix + nx * (iy + ny * iz))
+        cu = np.uintp(c)
         steps += 1
         if occ is None:
-            r0 = cell_start[c]
-            r1 = cell_start[c + np.uintp(1)]
+            r0 = cell_start[cu]
+            r1 = cell_start[cu + np.uintp(1)]
         else:
             r0 = 0
             r1 = 0
-            if (occ[c >> np.uintp(3)] >> (c & np.uintp(7))) & 1:
-                r0 = cell_start[c]
-                r1 = cell_start[c + np.uintp(1)]
+            if (occ[cu >> np.uintp(3)] >> (cu & np.uintp(7))) & 1:
+                r0 = cell_start[cu]
+                r1 = cell_start[cu + np.uintp(1)]
         for r in range(r0, r1):
             ru = np.uintp(r)
-            tid = tri_ids[ru]
             if mb is not None:
+                tid = tri_ids[ru]
                 h = tid & (MAILBOX - 1)
                 if mb[chunk, h] == tid:
                     skips += 1
@@ -187,66 +201,68 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                              tv[ru, 6], tv[ru, 7], tv[ru, 8], tmin, best)
             if t < best:
                 best = t
-                best_id = tid
+                best_ref = r
                 if anyhit:
-                    return best, best_id, 1, steps, tests, skips, jumps
+                    return best, tri_ids[ru], 1, steps, tests, skips, jumps
         # leave the cell through its nearest plane
         if tnx < tny:
             if tnx < tnz:
-                if best <= tnx or tnx > t1:
+                if best <= tnx or lx == 0:
                     break
-                ix += sx
-                if ix < 0 or ix >= nx:
-                    break
+                lx -= 1
+                c += cdx
                 tnx += tdx
+                if macro is not None:
+                    ix += sx
             else:
-                if best <= tnz or tnz > t1:
+                if best <= tnz or lz == 0:
                     break
-                iz += sz
-                if iz < 0 or iz >= nz:
-                    break
+                lz -= 1
+                c += cdz
                 tnz += tdz
+                if macro is not None:
+                    iz += sz
         else:
             if tny < tnz:
-                if best <= tny or tny > t1:
+                if best <= tny or ly == 0:
                     break
-                iy += sy
-                if iy < 0 or iy >= ny:
-                    break
+                ly -= 1
+                c += cdy
                 tny += tdy
+                if macro is not None:
+                    iy += sy
             else:
-                if best <= tnz or tnz > t1:
+                if best <= tnz or lz == 0:
                     break
-                iz += sz
-                if iz < 0 or iz >= nz:
-                    break
+                lz -= 1
+                c += cdz
                 tnz += tdz
-    if best_id < 0:
-        best = INF
-    return best, best_id, 1, steps, tests, skips, jumps
+                if macro is not None:
+                    iz += sz
+    if best_ref < 0:
+        return INF, -1, 1, steps, tests, skips, jumps
+    return best, tri_ids[np.uintp(best_ref)], 1, steps, tests, skips, jumps
 
 
 @pjit
 def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
                out_t, out_id, counters, mb, macro, mshift, occ):
-    """Batched grid traversal, ``prange`` over chunks of CHUNK rays. ``counters`` and ``mb`` are
-    arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
-    m = O.shape[0]
-    nchunks = (m + CHUNK - 1) // CHUNK
-    for ch in prange(nchunks):
-        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, st, te, sk, ju = grid_ray(
-                np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
-                np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
-                gp, nx, ny, nz, cell_start, tri_ids, tv, mb, ch, macro, mshift, occ)
-            out_t[i] = t
-            out_id[i] = tid
-            if counters is not None:
-                counters[i, 0] = su
-                counters[i, 1] = st
-                counters[i, 2] = te
-                counters[i, 3] = ju
-                counters[i, 4] = sk
+    """Batched grid traversal, ``prange`` over rays. ``counters`` and ``mb`` (one mailbox row per
+    thread) are arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
+    for i in prange(O.shape[0]):
+        t, tid, su, st, te, sk, ju = grid_ray(
+            np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+            np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
+            gp, nx, ny, nz, cell_start, tri_ids, tv, mb, get_thread_id() if mb is not None else 0,
+            macro, mshift, occ)
+        out_t[i] = t
+        out_id[i] = tid
+        if counters is not None:
+            counters[i, 0] = su
+            counters[i, 1] = st
+            counters[i, 2] = te
+            counters[i, 3] = ju
+            counters[i, 4] = sk
 
 
 def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
@@ -327,7 +343,8 @@ class UniformGrid(Accel):
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         m = len(o)
         out_t, out_id, cnt = self._outputs(m, count)
-        mb = np.empty(((m + CHUNK - 1) // CHUNK, MAILBOX), np.int32) if self.mailbox else None
+        # one mailbox row per pool thread (get_thread_id() < NUMBA_NUM_THREADS)
+        mb = np.empty((numba.config.NUMBA_NUM_THREADS, MAILBOX), np.int32) if self.mailbox else None
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
                    self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_)

@@ -34,9 +34,11 @@ from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_setup, ray_box, ray_triangle
-from tracer.grid import CHUNK, grid_assign, grid_params, res_from_cells
+from tracer.grid import grid_assign, grid_params, res_from_cells
 from tracer.memory import check_budget
 
+#: rays per parallel chunk (each chunk owns one DDA-state stack)
+CHUNK = 64
 NCOUNT = len(COUNTER_NAMES)
 #: per-level counter columns of :meth:`NestedGrid.intersect_levels`
 LEVEL_COUNTERS = ("setups", "steps", "tests")
