@@ -12,9 +12,9 @@ import time
 
 import numba
 import numpy as np
-from numba import get_thread_id, prange
+from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
@@ -246,23 +246,26 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
 
 @pjit
 def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
-               out_t, out_id, counters, mb, macro, mshift, occ):
-    """Batched grid traversal, ``prange`` over rays. ``counters`` and ``mb`` (one mailbox row per
-    thread) are arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
-    for i in prange(O.shape[0]):
-        t, tid, su, st, te, sk, ju = grid_ray(
-            np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
-            np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
-            gp, nx, ny, nz, cell_start, tri_ids, tv, mb, get_thread_id() if mb is not None else 0,
-            macro, mshift, occ)
-        out_t[i] = t
-        out_id[i] = tid
-        if counters is not None:
-            counters[i, 0] = su
-            counters[i, 1] = st
-            counters[i, 2] = te
-            counters[i, 3] = ju
-            counters[i, 4] = sk
+               out_t, out_id, counters, mb, macro, mshift, occ, nt):
+    """Batched grid traversal: ``prange`` over the ``nt`` threads, each taking every nt-th block of
+    BLOCK rays (see :data:`tracer._jit.BLOCK`). ``counters`` and ``mb`` (one mailbox row per thread)
+    are arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
+    m = O.shape[0]
+    for th in prange(nt):
+        for b in range(th, nblocks(m), nt):
+            for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+                t, tid, su, st, te, sk, ju = grid_ray(
+                    np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+                    np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
+                    anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ)
+                out_t[i] = t
+                out_id[i] = tid
+                if counters is not None:
+                    counters[i, 0] = su
+                    counters[i, 1] = st
+                    counters[i, 2] = te
+                    counters[i, 3] = ju
+                    counters[i, 4] = sk
 
 
 def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
@@ -343,11 +346,11 @@ class UniformGrid(Accel):
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         m = len(o)
         out_t, out_id, cnt = self._outputs(m, count)
-        # one mailbox row per pool thread (get_thread_id() < NUMBA_NUM_THREADS)
-        mb = np.empty((numba.config.NUMBA_NUM_THREADS, MAILBOX), np.int32) if self.mailbox else None
+        mb = np.empty((numba.get_num_threads(), MAILBOX), np.int32) if self.mailbox else None
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
-                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_)
+                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_,
+                   numba.get_num_threads())
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
