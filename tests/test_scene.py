@@ -131,6 +131,59 @@ def test_cylinder_196_long_skinny():
     assert set(np.unique(t[:, :, 2])) == {-1.0, 1.0}
 
 
+@pytest.mark.parametrize("models", ["teapot", "sphere-fallback"])
+def test_teapot_in_stadium_camera_sees_the_teapot(models, monkeypatch):
+    """teapot-in-stadium has a view (a close-up of the teapot): its camera stands inside the stadium and
+    most camera rays hit the teapot, whose triangles come first; random rays stay on the whole scene's
+    bounding sphere and almost all of them see only the stadium. Works with the teapot model and with
+    the sphere that stands in for it when the model is missing. The view survives pickling (Dask)."""
+    import pickle
+
+    from tracer import scene as scene_mod
+    from tracer.grid import UniformGrid
+    from tracer.procedural import box, sphere
+    from tracer.rays import bounding_sphere, camera_frame, make_rays
+    if models == "sphere-fallback":
+        monkeypatch.setattr(scene_mod, "manifest", lambda models=None: {})
+    elif "teapot" not in manifest():
+        pytest.skip("teapot model not in ../shared/models (the fallback case still runs)")
+    sc = load_scene("teapot-in-stadium")
+    n_pot = sc.report["teapot_triangles"]
+    assert n_pot == sc.n - len(box((0, 0, 0), (1, 1, 1), sub=4))
+    assert n_pot == (6320 if models == "teapot" else len(sphere(6000)))
+    pot = sc.tris[:n_pot].reshape(-1, 3).astype(np.float64)
+    lo, hi = pot.min(0), pot.max(0)
+    # bounds: still the whole stadium (200x the pot's size), untouched by the view
+    np.testing.assert_allclose(sc.bounds, scene_mod.scene_bounds(sc.tris))
+    assert (sc.bounds[1] - sc.bounds[0]).min() > 150 * (hi - lo).max()
+    center, radius = sc.view
+    np.testing.assert_allclose(center, (lo + hi) / 2, atol=1e-6)
+    assert radius == pytest.approx((hi - lo).min() / 2, rel=1e-6)
+    eye = camera_frame(sc)[0]
+    assert (eye > sc.bounds[0]).all() and (eye < sc.bounds[1]).all()  # inside the stadium
+    assert np.linalg.norm(eye - center) < 5 * radius < 0.05 * bounding_sphere(sc)[1]
+    grid = UniformGrid(factor=1.0).build(sc)
+    cam = make_rays(sc, "camera", 1024)
+    hits, _ = grid.intersect(cam.origins, cam.directions, counters=False)
+    on_pot = float(((hits.tri_id >= 0) & (hits.tri_id < n_pot)).mean())
+    assert on_pot > 0.5, on_pot
+    rnd = make_rays(sc, "random", 1024)
+    c, r = bounding_sphere(sc)
+    np.testing.assert_allclose(np.linalg.norm(rnd.origins - c, axis=1), r, rtol=1e-5)
+    hits, _ = grid.intersect(rnd.origins, rnd.directions, counters=False)
+    assert float(((hits.tri_id >= 0) & (hits.tri_id < n_pot)).mean()) < 0.01
+    back = pickle.loads(pickle.dumps(sc))
+    np.testing.assert_array_equal(back.view[0], center)
+    assert back.view[1] == radius
+
+
+def test_view_defaults_to_none_and_is_validated(load):
+    assert load("bunny-948").view is None and load_scene("cylinder-196").view is None
+    tri = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32)
+    with pytest.raises(GridcostError, match="view"):
+        Scene(tri, "bad-view", view=((0, 0, 0), 0.0))
+
+
 def test_particles_100():
     scene = load_scene("particles-100")
     assert scene.n == 100

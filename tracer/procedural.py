@@ -5,7 +5,11 @@
                             (Ize 2007 Table 3: N = 196, 3996, 19996)
 ``particles-N``             N small triangles scattered uniformly in a unit cube ("exploding
                             particles", Ize 2007 Sec 4.3: scattered data)
-``teapot-in-stadium``       the teapot mesh inside a box 200x its size (the classic grid failure)
+``teapot-in-stadium``       the teapot mesh inside a box 200x its size (the classic grid failure);
+                            its ``view`` is a close-up of the teapot, so cameras (camera and path
+                            rays) stand in the stadium looking at the teapot, which fills the
+                            frame, while random rays (whole bounding sphere) mostly see only the
+                            stadium
 ``room``                    ~270K-triangle room of tables and chairs made of subdivided boxes on a
                             floor (no walls, so outside rays reach them), standing in for Ize's
                             conference room (282,664 triangles)
@@ -55,7 +59,8 @@ def _count(m) -> int:
 def make(spec: str):
     from tracer.scene import Scene
     if spec == "teapot-in-stadium":
-        return Scene(teapot_in_stadium(), spec, "procedural")
+        tris, n_pot, view = _teapot_in_stadium()
+        return Scene(tris, spec, "procedural", report={"teapot_triangles": n_pot}, view=view)
     if spec == "room":
         return Scene(room(), spec, "procedural")
     for kind, pat in PATTERNS.items():
@@ -161,7 +166,18 @@ def boxes(n: int, seed: int = 2) -> np.ndarray:
 
 def teapot_in_stadium() -> np.ndarray:
     """The teapot model (from the models directory; a sphere if it is missing) inside a stadium:
-    a subdivided box 200x the teapot's size (floor, walls, roof)."""
+    a subdivided box 200x the teapot's size (floor, walls, roof). The teapot's triangles come first."""
+    return _teapot_in_stadium()[0]
+
+
+def _teapot_in_stadium():
+    """(triangles, number of teapot triangles (the first ones), view ``(centre, radius)``).
+
+    The view is a close-up of the teapot: centred on its box, radius half the box's smallest extent
+    (the pot's height), so the pot fills the camera's frame (spout and handle may be cut off). Its
+    full bounding sphere (half the box diagonal) would leave the pot about 15 % of the pixels from the
+    default camera direction, the rest of the image being stadium floor and walls; this view gives
+    about 85 % (a sphere stand-in: pi / 4)."""
     from tracer.scene import load_scene, manifest
     if "teapot" in manifest():
         pot = load_scene("teapot").tris
@@ -172,7 +188,9 @@ def teapot_in_stadium() -> np.ndarray:
     size = float((hi - lo).max())
     c = (lo + hi) / 2
     stadium = box(c - 100 * size, c + 100 * size, sub=4)
-    return np.concatenate([pot, stadium]).astype(np.float32)
+    lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
+    view = ((lo64 + hi64) / 2, float((hi64 - lo64).min() / 2))
+    return np.concatenate([pot, stadium]).astype(np.float32), len(pot), view
 
 
 def room(target: int = 280_000) -> np.ndarray:

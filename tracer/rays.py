@@ -2,7 +2,8 @@
 
 * ``random`` — each ray through two points uniform on the scene's bounding sphere (Hapala 2011;
   Ize 2007's "all rays hit the root box from outside, all equally likely").
-* ``camera`` — pinhole primary rays framing the scene, W x H.
+* ``camera`` — pinhole primary rays framing the scene (its ``view`` when set, e.g. the teapot of
+  ``teapot-in-stadium``; else its bounding sphere), W x H.
 * ``path`` — camera rays plus k cosine-weighted diffuse bounces from their hit points.
 * ``adversarial`` — axis-aligned, exactly along cell planes, through vertices and edges, starting
   inside cells and on the boundary, parallel to faces.
@@ -40,13 +41,24 @@ def bounding_sphere(scene) -> tuple[np.ndarray, float]:
     return (lo + hi) / 2, float(np.linalg.norm(hi - lo) / 2)
 
 
+def view_sphere(scene) -> tuple[np.ndarray, float]:
+    """The sphere cameras frame: the scene's ``view`` (region of interest) when set, else its
+    bounding sphere."""
+    view = getattr(scene, "view", None)
+    if view is None:
+        return bounding_sphere(scene)
+    return np.asarray(view[0], np.float64), float(view[1])
+
+
 def _sphere_points(rng, n) -> np.ndarray:
     v = rng.normal(size=(n, 3))
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def random_rays(scene, n: int, seed: int = 0) -> Rays:
-    """Rays through two independent uniform points on the bounding sphere (origin: the first)."""
+    """Rays through two independent uniform points on the bounding sphere (origin: the first).
+    Always the whole scene's sphere, never its ``view``: in ``teapot-in-stadium`` almost every random
+    ray sees only the stadium walls (the teapot is 1/200 of the stadium's size)."""
     rng = np.random.default_rng(seed)
     c, r = bounding_sphere(scene)
     a = c + r * _sphere_points(rng, n)
@@ -57,7 +69,11 @@ def random_rays(scene, n: int, seed: int = 0) -> Rays:
 
 
 def camera_frame(scene, eye_dir=(0.55, 0.45, 0.7), fov_deg: float = 45.0):
-    c, r = bounding_sphere(scene)
+    """(eye, forward, right, up, tan(fov / 2)) of a pinhole camera looking along ``-eye_dir`` whose
+    square frame just contains the sphere :func:`view_sphere` (the scene's ``view`` when set, else the
+    bounding sphere). With a view inside the scene the eye may be inside the scene: in
+    ``teapot-in-stadium`` it stands in the stadium, close to the teapot, which fills the frame."""
+    c, r = view_sphere(scene)
     fwd = -np.asarray(eye_dir, float)
     fwd /= np.linalg.norm(fwd)
     dist = r / np.sin(np.radians(fov_deg) / 2)
@@ -79,7 +95,8 @@ def tile_order(width: int, height: int, tile: int) -> np.ndarray:
 
 def camera_rays(scene, width: int, height: int | None = None, seed: int = 0, jitter: bool = False,
                 eye_dir=(0.55, 0.45, 0.7), tile: int = 8) -> Rays:
-    """Pinhole primary rays of a W x H image from a camera framing the bounding sphere, ordered in
+    """Pinhole primary rays of a W x H image from a camera framing the scene's view (default: the
+    bounding sphere; see :func:`camera_frame`), ordered in
     ``tile`` x ``tile`` pixel blocks (so consecutive rays are coherent packets; ``tile=1`` gives
     plain row-major order)."""
     height = height or width
@@ -104,9 +121,10 @@ def _normals(scene, ids) -> np.ndarray:
 
 
 def path_rays(scene, n: int, bounces: int = 2, seed: int = 0, accel=None) -> Rays:
-    """Camera rays (about n / (bounces + 1) of them, jittered) and, for each hit, ``bounces``
-    cosine-weighted diffuse continuations; origins are offset along the normal by 1e-4 of the
-    scene radius. Hit points come from ``accel`` (default: a grid built here)."""
+    """Camera rays (about n / (bounces + 1) of them, jittered; framing the scene's view when set)
+    and, for each hit, ``bounces`` cosine-weighted diffuse continuations; origins are offset along the
+    normal by 1e-4 of the whole scene's bounding-sphere radius. Hit points come from ``accel``
+    (default: a grid built here)."""
     if accel is None:
         from tracer.grid import UniformGrid
         accel = UniformGrid(factor=4.0).build(scene)

@@ -31,17 +31,30 @@ CACHE_VERSION = 3
 
 @dataclass
 class Scene:
-    """Triangles ``tris`` (N, 3, 3) float32, ``bounds`` (2, 3) float32, provenance and load report."""
+    """Triangles ``tris`` (N, 3, 3) float32, ``bounds`` (2, 3) float32, provenance and load report.
+
+    ``view``: an optional region of interest ``(center xyz, radius)`` that cameras frame (camera and
+    path rays, :func:`tracer.rays.camera_frame`); ``None`` (the default) frames the bounding sphere of
+    the whole scene. It changes neither the bounds nor random rays (those stay defined on the whole
+    scene's bounding sphere). ``teapot-in-stadium`` sets it to a close-up of the teapot."""
     tris: np.ndarray
     name: str
     source: str = ""
     report: dict = field(default_factory=dict)
     bounds: np.ndarray = None
+    view: tuple | None = None
 
     def __post_init__(self):
         self.tris = np.ascontiguousarray(self.tris, dtype=np.float32).reshape(-1, 3, 3)
         if self.bounds is None:
             self.bounds = scene_bounds(self.tris)
+        if self.view is not None:
+            center, radius = self.view
+            center = np.asarray(center, dtype=np.float64).reshape(3)
+            radius = float(radius)
+            if not (np.isfinite(center).all() and np.isfinite(radius) and radius > 0):
+                raise GridcostError(f"{self.name}: view must be (finite center xyz, radius > 0), got {self.view!r}")
+            self.view = (center, radius)
 
     @property
     def n(self) -> int:
