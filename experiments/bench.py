@@ -117,6 +117,43 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     if "trimesh" in s and "grid" in s:
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
+    out["paired"] = _paired(scene, rays, s, threads, log)
+    return out
+
+
+def _paired(scene, rays, s, threads, log, rounds: int = 7) -> dict:
+    """The headline ratios measured in interleaved rounds (:func:`tracer.timing.time_paired`): grid
+    against Embree (both one thread), and the grid's scaling from 1 to ``threads`` threads (wall
+    time for both). Median, min and max of the per-round ratios."""
+    import numba
+
+    from tracer.reference import EmbreeAccel
+    from tracer.timing import paired_ratio, time_paired
+    out = {}
+    if "grid" not in s:
+        return out
+    struct, params = VARIANTS["grid"]
+    grid = build(scene, struct, **params)
+    if "embree" in s and threads == 1:
+        emb = EmbreeAccel().build(scene)
+        out["grid/embree"] = {}
+        for kind, r in rays.items():
+            tp = time_paired({"grid": lambda: grid.intersect(r.origins, r.directions, counters=False),
+                              "embree": lambda: emb.intersect(r.origins, r.directions, counters=False)}, rounds)
+            med, lo, hi = paired_ratio(tp, "embree", "grid")  # throughput ratio = time ratio inverted
+            out["grid/embree"][kind] = {"ratio": med, "min": lo, "max": hi, "rounds": rounds}
+            log(f"  paired grid/embree {kind:7s} {med:6.3f}x  (rounds {lo:.3f}-{hi:.3f})")
+    if threads > 1:
+        out["grid_scaling"] = {}
+        def on(n, r):
+            numba.set_num_threads(n)
+            grid.intersect(r.origins, r.directions, counters=False)
+        for kind, r in rays.items():
+            tp = time_paired({"1": lambda: on(1, r), "n": lambda: on(threads, r)}, rounds, clock=time.perf_counter)
+            med, lo, hi = paired_ratio(tp, "1", "n")
+            out["grid_scaling"][kind] = {"threads": threads, "speedup": med, "min": lo, "max": hi, "rounds": rounds}
+            log(f"  paired grid scaling 1 -> {threads} threads {kind:7s} {med:5.2f}x  (rounds {lo:.2f}-{hi:.2f})")
+        numba.set_num_threads(threads)
     return out
 
 

@@ -60,6 +60,26 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
 
+def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[], float] | None = None) -> dict:
+    """Time several callables in interleaved rounds (each round times every callable once with
+    :func:`time_call`), so slow drifts of a shared machine hit all of them alike. Returns name ->
+    list of per-round median seconds; compare callables by the median of per-round ratios
+    (:func:`paired_ratio`), not by ratios of separately taken medians."""
+    out = {k: [] for k in fns}
+    for fn in fns.values():
+        fn()  # warm-up (JIT compilation, caches) before the first round
+    for _ in range(max(1, rounds)):
+        for k, fn in fns.items():
+            out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock).median)
+    return out
+
+
+def paired_ratio(times: dict, a: str, b: str) -> tuple[float, float, float]:
+    """Median, min and max over rounds of times[a] / times[b] (from :func:`time_paired`)."""
+    r = np.asarray(times[a]) / np.asarray(times[b])
+    return float(np.median(r)), float(r.min()), float(r.max())
+
+
 def set_threads(n: int | None) -> int:
     """Use ``n`` Numba threads (all when None). With ``GRIDCOST_PIN=1`` the process is also pinned to
     the first ``n`` CPUs (off by default: on a shared machine pinning to a busy CPU hurts more than it
