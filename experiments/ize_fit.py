@@ -15,7 +15,8 @@ import pandas as pd
 from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum, select_model
 from experiments.common import add_scene_args, scene_from_args
 from experiments.results import PointStore, write_csv, write_json, write_meta
-from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, penalty_pct, sweep
+from experiments.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, paired_penalties, penalty_pct,
+                               sweep)
 from tracer.rays import make_rays
 from tracer.timing import set_threads
 
@@ -48,12 +49,19 @@ def main(args) -> int:
     g = GridCostFit(form, setup).fit(df.cells, df.ns_per_ray, scene.n)
     c = CounterCostFit().fit([scene.name] * len(df), df.steps, df.tests, df.ns_per_ray)
     m_best = refine_minimum(df.cells, df.ns_per_ray)
-    m_pred = g.optimum()
+    m_pred, m_pred_from = g.optimum(), sel["chosen"]
+    if not (np.isfinite(m_pred) and m_pred > 0):  # a fitted Ts at 0 has no finite optimum: say so, use the counters
+        m_pred, m_pred_from = 2.0 * scene.n * c.ti_over_ts_, "counter fit (the chosen model's optimum is not finite)"
+    m_pred = float(np.clip(m_pred, df.cells.min(), df.cells.max()))
     extra = pd.DataFrame(sweep(scene, "grid", [{"cells": float(round(m_best))}, {"cells": float(round(m_pred))}],
                                rays, store, repeats, desc="fit check"))
     allrows = pd.concat([df, extra], ignore_index=True)
     t_best = allrows.ns_per_ray.min()
     t_pred = float(extra[extra.param_cells == float(round(m_pred))].ns_per_ray.iloc[0])
+    # the predicted M against the three fastest swept points, timed side by side (paired rounds)
+    pp = paired_penalties(scene, "grid", {"pred": {"cells": float(round(m_pred))}},
+                          [{"cells": c} for c in fastest(allrows, 3)], rays["random"], store,
+                          rounds=3 if args.quick else 7)["pred"]
     out = {
         "scene": scene.name, "N": scene.n, "model": sel["chosen"], "why": sel["why"],
         "tsetup": g.tsetup_, "ts": g.ts_, "ti": g.ti_, "ti_over_ts": g.ti_over_ts_,
@@ -61,8 +69,9 @@ def main(args) -> int:
         "r2": g.metrics_["r2"], "mape": g.metrics_["mape"], "cond": g.cond_,
         "counter_fit": {"tsetup": c.tsetup_[scene.name], "ts": c.ts_, "ti": c.ti_, "ti_over_ts": c.ti_over_ts_,
                         "ci": c.ci_, "r2": c.metrics_["r2"], "mape": c.metrics_["mape"], "cond": c.cond_},
-        "m_pred": m_pred, "m_best": float(allrows.loc[allrows.ns_per_ray.idxmin()].cells),
-        "penalty": penalty_pct(t_pred, t_best), "candidates": sel["candidates"],
+        "m_pred": m_pred, "m_pred_from": m_pred_from, "m_best": float(allrows.loc[allrows.ns_per_ray.idxmin()].cells),
+        "penalty": pp["penalty_pct"], "penalty_range": [pp["min_pct"], pp["max_pct"]],
+        "penalty_swept": penalty_pct(t_pred, t_best), "candidates": sel["candidates"],
         "rays": n_rays, "threads": threads, "units": "ns per ray",
     }
     out_dir = Path(args.out) / "fit"
@@ -85,6 +94,9 @@ def main(args) -> int:
           f"condition number {g.cond_:.1f}, R² {g.metrics_['r2']:.3f}, MAPE {g.metrics_['mape']:.1f} %")
     print(f"  counters: Ts = {c.ts_:.2f} ns/step, Ti = {c.ti_:.2f} ns/test, Ti/Ts = {c.ti_over_ts_:.2f} "
           f"CI {_ci(c.ci_['ti_over_ts'])}, R² {c.metrics_['r2']:.3f}")
-    print(f"  predicted optimum M = {m_pred:,.0f} ({m_pred / scene.n:.1f}N), best swept M = {out['m_best']:,.0f} "
-          f"({out['m_best'] / scene.n:.1f}N), penalty {out['penalty']:.1f} %")
+    print(f"  predicted optimum M = {m_pred:,.0f} ({m_pred / scene.n:.1f}N; {m_pred_from}), best swept M = {out['m_best']:,.0f} "
+          f"({out['m_best'] / scene.n:.1f}N)")
+    print(f"  penalty of the predicted M: {out['penalty']:.1f} % (re-timed side by side with the three fastest "
+          f"swept M over {pp['rounds']} rounds: {pp['min_pct']:.1f} .. {pp['max_pct']:.1f} %; "
+          f"from the sweep alone {out['penalty_swept']:.1f} %)")
     return 0
