@@ -89,29 +89,34 @@ def penalty_pct(t, best) -> float:
 
 
 def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict], rays, store: PointStore,
-                     rounds: int = 7, repeats: int = 3) -> dict:
+                     rounds: int = 7, repeats: int = 3, others: dict | None = None) -> dict:
     """Penalty of each of ``targets`` (name -> parameters, e.g. the theory's M) against the best of
     them and ``candidates`` (e.g. the three fastest swept points), re-measured side by side in
     interleaved rounds (:func:`tracer.timing.time_paired`) on one ray set, so the slow drifts of a
     shared machine cancel: a sweep measures its points minutes apart, and drift of that size (10-20 %
     here) shows up as a penalty. The best is the fastest point by median time; a target's penalty is
     the median over rounds of its per-round ratio to the best (0 for the best itself). Returns name
-    -> {penalty_pct, min_pct, max_pct, target_ns, best_ns, best_params}; stored in ``store`` like a
-    sweep point (resumable)."""
+    -> {penalty_pct, min_pct, max_pct, target_ns, best_ns, best_params, speedup}; stored in ``store``
+    like a sweep point (resumable). ``others`` (name -> (structure, parameters), e.g. the best
+    one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
+    holds each target's median per-round speed-up over each of them."""
     from tracer.timing import paired_ratio, time_paired
     points = []
     for p in list(targets.values()) + list(candidates):
         if p not in points:
             points.append(p)
     spec = {"paired": 1, "scene": scene.name, "N": scene.n, "structure": structure, "targets": targets,
-            "points": points, "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats}
+            "points": points, "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats,
+            **({"others": others} if others else {})}
     done = store.get(spec)
     if done is not None:
         return done
-    accels = [build(scene, structure, **p) for p in points]
+    accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
+    for name, (st, p) in (others or {}).items():
+        accels[name] = build(scene, st, **p)
     tp = time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
-                      for i, a in enumerate(accels)}, rounds=rounds, repeats=repeats)
-    med = {i: float(np.median(v)) for i, v in tp.items()}
+                      for i, a in accels.items()}, rounds=rounds, repeats=repeats)
+    med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
     best = min(med, key=med.get)
     out = {}
     for name, p in targets.items():
@@ -119,7 +124,8 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
         ratio, lo, hi = paired_ratio(tp, i, best)
         out[name] = {"penalty_pct": penalty_pct(ratio, 1.0), "min_pct": penalty_pct(lo, 1.0),
                      "max_pct": penalty_pct(hi, 1.0), "target_ns": med[i] / rays.n * 1e9,
-                     "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": rounds}
+                     "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": rounds,
+                     "speedup": {o: paired_ratio(tp, o, i)[0] for o in (others or {})}}
     store.put(spec, out)
     return out
 
