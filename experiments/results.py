@@ -51,10 +51,23 @@ def _jsonable(x):
         return str(x)
 
 
+#: where figures go: the repo's paper_figs/ for the default results directory, else <out>/paper_figs
+#: (so a run with ``--out /tmp/x`` never overwrites the committed figures); set by :func:`set_output`
+FIG_DIR: Path | None = None
+
+
+def set_output(out) -> Path:
+    """Point :func:`save_figure` at the figures directory that belongs to results directory ``out``."""
+    global FIG_DIR
+    out = Path(out).resolve()
+    FIG_DIR = REPO / "paper_figs" if out == (REPO / "results").resolve() else out / "paper_figs"
+    return FIG_DIR
+
+
 def save_figure(fig, name: str, out_dir=None) -> list[Path]:
-    """Save ``fig`` as paper_figs/<name>.png and .pdf (atomically)."""
+    """Save ``fig`` as <figures dir>/<name>.png and .pdf (atomically); see :func:`set_output`."""
     import io
-    out_dir = Path(out_dir) if out_dir else REPO / "paper_figs"
+    out_dir = Path(out_dir) if out_dir else (FIG_DIR or REPO / "paper_figs")
     paths = []
     for ext in ("png", "pdf"):
         buf = io.BytesIO()

@@ -89,6 +89,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         import numba
         numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    from experiments.results import set_output
+    set_output(args.out)
     try:
         if args.dask:
             from experiments.executor import set_executor
