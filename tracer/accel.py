@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from tracer.errors import GridcostError
@@ -116,7 +117,7 @@ class TreeTraceMixin:
             return out_t, out_id, cnt
         self._kernel(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
                      self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
-                     out_t, out_id, cnt)
+                     out_t, out_id, cnt, numba.get_num_threads())
         return out_t, out_id, cnt
 
 

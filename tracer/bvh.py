@@ -25,18 +25,17 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.kdtree import root_box
 from tracer.memory import check_budget
 
-#: rays per parallel chunk (each chunk owns one stack)
-CHUNK = 64
 #: relative widening of box/hit comparisons (of the ray's t scale), as in tracer.kdtree
 T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
@@ -330,14 +329,14 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
 
 @pjit
 def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size, out_t, out_id,
-              counters):
-    """Batched BVH traversal, ``prange`` over chunks of CHUNK rays (one stack per chunk);
+              counters, nt):
+    """Batched BVH traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer._jit.BLOCK`), one stack per block;
     ``counters`` (m, 5) int32 or None (the variant without counting)."""
     m = O.shape[0]
-    nchunks = (m + CHUNK - 1) // CHUNK
-    for ch in prange(nchunks):
-        bvh_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, box, diag, ni, nf,
-                  tv, ids, stack_size, out_t, out_id, counters)
+    for th in prange(nt):
+        for b in range(th, nblocks(m), nt):
+            bvh_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, ni, nf,
+                      tv, ids, stack_size, out_t, out_id, counters)
 
 
 class BVH(TreeTraceMixin, Accel):

@@ -27,7 +27,7 @@ the same memory. ``tri_ids_`` (refs) holds the scene's triangle indices in leaf 
 ``tri_verts_`` (refs, 9) float32 the triangles copied in that order.
 
 Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
-per chunk of CHUNK rays), early exit once the closest hit lies before the next node's t-range;
+per block of BLOCK rays), early exit once the closest hit lies before the next node's t-range;
 the any-hit variant (``IntersectP``) stops at the first hit. The near/far choice is branch-free.
 Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
 widened by ``tol`` = T_EPS (2e-6) of the ray's t scale, so rounding can only add node visits,
@@ -41,10 +41,11 @@ from __future__ import annotations
 import math
 import time
 
+import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
@@ -52,8 +53,6 @@ from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.memory import check_budget
 
-#: rays per parallel chunk (each chunk owns one todo stack)
-CHUNK = 64
 #: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
 #: float32-level rounding of ray_triangle's barycentric test (hits ~1e-7 outside a triangle)
 T_EPS = 2e-6
@@ -496,14 +495,14 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
 
 @pjit
 def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
-             out_t, out_id, counters):
-    """Batched kd-tree traversal, ``prange`` over chunks of CHUNK rays (one todo stack per chunk).
+             out_t, out_id, counters, nt):
+    """Batched kd-tree traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer._jit.BLOCK`), one todo stack per block.
     ``counters`` is an (m, 5) int32 array or None (None compiles the variant without counting)."""
     m = O.shape[0]
-    nchunks = (m + CHUNK - 1) // CHUNK
-    for ch in prange(nchunks):
-        kd_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, box, diag, nodes,
-                 nodes_f, tv, ids, stack_size, out_t, out_id, counters)
+    for th in prange(nt):
+        for b in range(th, nblocks(m), nt):
+            kd_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, nodes,
+                     nodes_f, tv, ids, stack_size, out_t, out_id, counters)
 
 
 def root_box(scene) -> np.ndarray:

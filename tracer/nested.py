@@ -26,10 +26,11 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit
 from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
@@ -37,8 +38,6 @@ from tracer.geometry import INF, dda_setup, ray_box, ray_triangle
 from tracer.grid import grid_assign, grid_params, res_from_cells
 from tracer.memory import check_budget
 
-#: rays per parallel chunk (each chunk owns one DDA-state stack)
-CHUNK = 64
 NCOUNT = len(COUNTER_NAMES)
 #: per-level counter columns of :meth:`NestedGrid.intersect_levels`
 LEVEL_COUNTERS = ("setups", "steps", "tests")
@@ -220,26 +219,26 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
 
 @pjit
 def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
-                 out_t, out_id, counters, lvl):
-    """Batched nested-grid traversal, ``prange`` over chunks of CHUNK rays (one DDA-state stack per
-    chunk). ``counters`` (m, 5) and ``lvl`` (m, levels, 3) are arrays or None (compiled out)."""
+                 out_t, out_id, counters, lvl, nt):
+    """Batched nested-grid traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer._jit.BLOCK`), one DDA-state stack per
+    thread. ``counters`` (m, 5) and ``lvl`` (m, levels, 3) are arrays or None (compiled out)."""
     m = O.shape[0]
-    nchunks = (m + CHUNK - 1) // CHUNK
-    for ch in prange(nchunks):
+    for th in prange(nt):
         sti = np.empty((levels, 10), np.int64)
         stf = np.empty((levels, 7), np.float64)
-        for i in range(ch * CHUNK, min(m, (ch + 1) * CHUNK)):
-            t, tid, su, st, te, no = nested_ray(
-                np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
-                np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit,
-                GF, GI, cells, tri_ids, tv, sti, stf, lvl, i)
-            out_t[i] = t
-            out_id[i] = tid
-            if counters is not None:
-                counters[i, 0] = su
-                counters[i, 1] = st
-                counters[i, 2] = te
-                counters[i, 3] = no
+        for b in range(th, nblocks(m), nt):
+            for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+                t, tid, su, st, te, no = nested_ray(
+                    np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+                    np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
+                    anyhit, GF, GI, cells, tri_ids, tv, sti, stf, lvl, i)
+                out_t[i] = t
+                out_id[i] = tid
+                if counters is not None:
+                    counters[i, 0] = su
+                    counters[i, 1] = st
+                    counters[i, 2] = te
+                    counters[i, 3] = no
 
 
 # ---------------------------------------------------------------- the structure
@@ -420,7 +419,7 @@ class NestedGrid(Accel):
         out_t, out_id, cnt = self._outputs(m, count)
         lvl = np.zeros((m, self.levels_, len(LEVEL_COUNTERS)), np.int32) if count else None
         nested_trace(o, d, tmin, tmax, anyhit, self.grid_f_, self.grid_i_, self.cells_,
-                     self.tri_ids_, self.tri_verts_, self.levels_, out_t, out_id, cnt, lvl)
+                     self.tri_ids_, self.tri_verts_, self.levels_, out_t, out_id, cnt, lvl, numba.get_num_threads())
         return out_t, out_id, cnt, lvl
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):

@@ -44,17 +44,16 @@ from __future__ import annotations
 
 import time
 
+import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.memory import check_budget
 
-#: rays per parallel chunk (each chunk owns one set of scratch buffers)
-CHUNK = 64
 #: object boxes are padded by this fraction of the largest scene extent ...
 PAD_REL = 1e-6
 #: ... plus this fraction of the coordinate's magnitude (a few float32 ulps)
@@ -506,14 +505,13 @@ def sl_chunk(lo, hi, O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv
 
 @pjit
 def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
-             out_t, out_id, counters):
-    """Batched traversal, ``prange`` over chunks of CHUNK rays, one set of scratch buffers per chunk;
+             out_t, out_id, counters, nt):
+    """Batched traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer._jit.BLOCK`), one set of scratch buffers per thread;
     ``counters`` (m, 5) int32 or None (the variant without counting)."""
     m = O.shape[0]
-    nchunks = (m + CHUNK - 1) // CHUNK
     ns = slot_tri.shape[0]
     ncur = 3 * (cs.shape[0] - 1)
-    for ch in prange(nchunks):
+    for th in prange(nt):
         st = np.empty(ns, np.int8)
         pend = np.empty(ns + 1, np.int32)
         hp = np.empty(ncur, np.int32)
@@ -526,9 +524,10 @@ def sl_trace(O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val
         org = np.empty(3, np.float64)
         inv = np.empty(3, np.float64)
         mode = np.empty(3, np.int8)
-        sl_chunk(ch * CHUNK, min(m, (ch + 1) * CHUNK), O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox,
-                 tv, ev_val, ev_code, out_t, out_id, counters, st, pend, hp, h_t, h_in, c_pos, c_end, c_slot,
-                 c_ax, org, inv, mode)
+        for b in range(th, nblocks(m), nt):
+            sl_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node,
+                     nbox, tv, ev_val, ev_code, out_t, out_id, counters, st, pend, hp, h_t, h_in, c_pos, c_end,
+                     c_slot, c_ax, org, inv, mode)
 
 
 class SortedLists(Accel):
@@ -584,7 +583,7 @@ class SortedLists(Accel):
             return out_t, out_id, cnt
         if not tmax.flags.writeable:  # a read-only array would compile another variant
             tmax = tmax.copy()
-        sl_trace(o, d, tmin, tmax, anyhit, self.child_start_, self.slot_tri_, self.slot_node_, self.node_box_, self.tri_verts_, self.ev_val_, self.ev_code_, out_t, out_id, cnt)
+        sl_trace(o, d, tmin, tmax, anyhit, self.child_start_, self.slot_tri_, self.slot_node_, self.node_box_, self.tri_verts_, self.ev_val_, self.ev_code_, out_t, out_id, cnt, numba.get_num_threads())
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
