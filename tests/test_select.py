@@ -165,8 +165,9 @@ def spd_calibration():
 def test_selector_on_real_scenes(spd_calibration, load):
     """A kd-tree-friendly scene (sphereflake: mostly empty space around many small spheres) builds the
     kd-tree for a large R; a small uniform scene keeps the grid for a small R. (teapot-in-stadium is
-    not used: with random or framing camera rays the stadium walls dominate and our grid beats our
-    kd-tree per ray there, see results/table1h.)"""
+    not used: on random rays, the kind calibrated here, the stadium walls dominate and our grid beats
+    our kd-tree per ray there; the kd-tree wins on its path rays, see the next test and
+    results/table1h.)"""
     from tracer.spd import spd_scene
     assert (spd_calibration.t_RH < spd_calibration.t_RG).all()
     sel = Selector(GridcostEstimator(), sample_rays=1000).fit(spd_calibration)
@@ -176,6 +177,32 @@ def test_selector_on_real_scenes(spd_calibration, load):
     assert small["choice"] == "grid" and small["rc_est"] > 1e3
     for out in (big, small):
         assert out["t_build_grid"] > 0 and out["t_build_hier"] > 0 and out["t_grid"] > 0
+
+
+def test_teapot_in_stadium_kdtree_wins_on_path_rays_not_on_random(load):
+    """The classic grid failure, in work (deterministic counters, no timing): path rays start from the
+    camera's close-up of the teapot, whose triangles all share one cell of the cells = N grid, so a grid
+    ray tests thousands of triangles and a kd-tree ray a few dozen; random rays (whole bounding sphere)
+    see the stadium walls, where the grid does the fewer tests."""
+    from costmodel.select import GRID_FACTOR
+    from tracer.grid import UniformGrid
+    from tracer.kdtree import KdTree
+    from tracer.rays import make_rays
+    sc = load("teapot-in-stadium")
+    grid = UniformGrid(factor=GRID_FACTOR).build(sc)
+    kd = KdTree().build(sc)
+    assert havran_stats(grid)["max_refs"] >= sc.report["teapot_triangles"]  # the whole teapot in one cell
+    tests = {}
+    for kind in ("path", "random"):
+        r = make_rays(sc, kind, 1500)
+        hg, cg = grid.intersect(r.origins, r.directions)
+        hk, ck = kd.intersect(r.origins, r.directions)
+        np.testing.assert_array_equal(hg.tri_id >= 0, hk.tri_id >= 0)
+        tests[kind] = (cg.mean()["tests"], ck.mean()["tests"])
+    g, k = tests["path"]
+    assert g > 1000 and g > 30 * k, tests
+    g, k = tests["random"]
+    assert g < k < 20, tests
 
 
 def test_selector_cli_json(run_cli, tmp_path):
