@@ -243,3 +243,26 @@ def select_model(M, T, N, candidates=CANDIDATES, tolerance_pct: float = 1.0) -> 
     why = (f"{chosen['model']}: CV MAPE {chosen['cv_mape_pct']:.1f} % within {tolerance_pct} points of the best "
            f"({best:.1f} %) with the fewest constants ({chosen['constants']})")
     return {"chosen": chosen["model"], "why": why, "candidates": rows}
+
+
+def pooling_evidence(scenes, steps, tests, T) -> dict:
+    """Does one (Ts, Ti) pair serve every scene, or does each scene need its own? Fits both
+    (pooled: per-scene Tsetup + one Ts, Ti; per-scene: Tsetup, Ts, Ti for each scene) by the same
+    relative least squares and compares AIC = n log(RSS/n) + 2k on the relative residuals (lower
+    is better; per-scene constants only on strong evidence, an AIC lower by more than 10). Returns
+    the AICs, parameter counts, the
+    per-scene fits (name -> CounterCostFit) and the verdict ``per_scene`` (bool)."""
+    scenes = np.asarray(scenes)
+    steps, tests, T = (np.asarray(v, float) for v in (steps, tests, T))
+    pooled = CounterCostFit(n_boot=0).fit(scenes.tolist(), steps, tests, T)
+    rel_p = (pooled.predict(scenes.tolist(), steps, tests) - T) / T
+    per, rel_s = {}, np.empty_like(T)
+    for s in dict.fromkeys(scenes.tolist()):
+        m = scenes == s
+        per[s] = CounterCostFit().fit([s] * int(m.sum()), steps[m], tests[m], T[m])
+        rel_s[m] = (per[s].predict([s] * int(m.sum()), steps[m], tests[m]) - T[m]) / T[m]
+    n, S = len(T), len(per)
+    aic = lambda rss, k: float(n * np.log(max(rss, 1e-300) / n) + 2 * k)  # noqa: E731
+    a_p, a_s = aic(float(rel_p @ rel_p), S + 2), aic(float(rel_s @ rel_s), 3 * S)
+    return {"aic_pooled": a_p, "aic_per_scene": a_s, "k_pooled": S + 2, "k_per_scene": 3 * S,
+            "per_scene": a_s < a_p - 10.0, "fits": per}

@@ -129,3 +129,22 @@ def test_two_level_m1_exponent_is_three_fifths():
     assert f.ci_[0] <= 0.6 <= f.ci_[1], (f.alpha_, f.ci_, Mb)
     assert 0.5 < f.alpha_ < 0.75
     assert not (f.ci_[0] <= 1.0 <= f.ci_[1])  # and distinguishable from the one-level exponent
+
+
+def test_pooling_evidence_detects_per_scene_constants():
+    """AIC picks per-scene (Ts, Ti) only when the scenes really differ."""
+    from costmodel.fit import pooling_evidence
+    rng = np.random.default_rng(0)
+    steps = np.tile(np.geomspace(2, 40, 12), 2)
+    tests = 60.0 / steps
+    scenes = ["a"] * 12 + ["b"] * 12
+    noise = 1 + 0.005 * rng.standard_normal(24)
+    same = (100 + 5.0 * steps + 15.0 * tests) * noise
+    ev = pooling_evidence(scenes, steps, tests, same)
+    assert not ev["per_scene"], ev
+    ts = np.where(np.array(scenes) == "a", 3.0, 9.0)
+    differ = (100 + ts * steps + 15.0 * tests) * noise
+    ev = pooling_evidence(scenes, steps, tests, differ)
+    assert ev["per_scene"], ev
+    assert ev["fits"]["a"].ts_ == pytest.approx(3.0, rel=0.1)
+    assert ev["fits"]["b"].ts_ == pytest.approx(9.0, rel=0.1)
