@@ -250,8 +250,8 @@ def pooling_evidence(scenes, steps, tests, T) -> dict:
     (pooled: per-scene Tsetup + one Ts, Ti; per-scene: Tsetup, Ts, Ti for each scene) by the same
     relative least squares and compares AIC = n log(RSS/n) + 2k on the relative residuals (lower
     is better; per-scene constants only on strong evidence, an AIC lower by more than 10). Returns
-    the AICs, parameter counts, the
-    per-scene fits (name -> CounterCostFit) and the verdict ``per_scene`` (bool)."""
+    the AICs, parameter counts, the per-scene fits (name -> CounterCostFit) and the verdict
+    ``per_scene`` (bool)."""
     scenes = np.asarray(scenes)
     steps, tests, T = (np.asarray(v, float) for v in (steps, tests, T))
     pooled = CounterCostFit(n_boot=0).fit(scenes.tolist(), steps, tests, T)
