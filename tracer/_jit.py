@@ -23,3 +23,17 @@ BLOCK = 256
 def nblocks(m):
     """Number of BLOCK-ray blocks covering m rays."""
     return (m + BLOCK - 1) // BLOCK
+
+
+@njit(cache=True, inline="always")
+def store_ray(out_t, out_id, counters, i, t, tid, setups, steps, tests, nodes, skips):
+    """Write ray i's result and, when ``counters`` is an array (not None), its counters in the
+    column order of :data:`tracer.accel.COUNTER_NAMES`."""
+    out_t[i] = t
+    out_id[i] = tid
+    if counters is not None:
+        counters[i, 0] = setups
+        counters[i, 1] = steps
+        counters[i, 2] = tests
+        counters[i, 3] = nodes
+        counters[i, 4] = skips

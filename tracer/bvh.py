@@ -29,7 +29,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import BLOCK, jit, nblocks, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
@@ -318,13 +318,8 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
                             break
                     if node < 0:
                         break
-        out_t[i] = best if best_id >= 0 else INF
-        out_id[i] = best_id
-        if counters is not None:
-            counters[i, 0] = 1 if in_box else 0
-            counters[i, 1] = leaves
-            counters[i, 2] = tests
-            counters[i, 3] = nvis
+        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
+                  leaves, tests, nvis, 0)
 
 
 @pjit

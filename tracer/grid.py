@@ -14,7 +14,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import BLOCK, jit, nblocks, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
@@ -258,14 +258,7 @@ def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv
                     np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                     np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
                     anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ)
-                out_t[i] = t
-                out_id[i] = tid
-                if counters is not None:
-                    counters[i, 0] = su
-                    counters[i, 1] = st
-                    counters[i, 2] = te
-                    counters[i, 3] = ju
-                    counters[i, 4] = sk
+                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, ju, sk)
 
 
 def macro_occupancy(cell_start, res, k: int) -> np.ndarray:

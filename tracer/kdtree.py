@@ -45,7 +45,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import BLOCK, jit, nblocks, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
@@ -484,13 +484,8 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
                 node = sn[spu]
                 ntmin = s0[spu]
                 ntmax = s1[spu]
-        out_t[i] = best if best_id >= 0 else INF
-        out_id[i] = best_id
-        if counters is not None:
-            counters[i, 0] = 1 if in_box else 0
-            counters[i, 1] = leaves
-            counters[i, 2] = tests
-            counters[i, 3] = nvis
+        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
+                  leaves, tests, nvis, 0)
 
 
 @pjit

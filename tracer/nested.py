@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import BLOCK, jit, nblocks, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
@@ -232,13 +232,7 @@ def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
                     np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                     np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
                     anyhit, GF, GI, cells, tri_ids, tv, sti, stf, lvl, i)
-                out_t[i] = t
-                out_id[i] = tid
-                if counters is not None:
-                    counters[i, 0] = su
-                    counters[i, 1] = st
-                    counters[i, 2] = te
-                    counters[i, 3] = no
+                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, no, 0)
 
 
 # ---------------------------------------------------------------- the structure

@@ -46,7 +46,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import jit, pjit
+from tracer._jit import jit, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, Counters, Hits, as_rays, tmax_array
 from tracer.constants import WALD_LAMBDA, WALD_MACROCELL
 from tracer.errors import GridcostError
@@ -508,12 +508,9 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]), np.float64(D[i, 0]),
                 np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit, gp,
                 nxg, nyg, nzg, cell_start, tri_ids, tv, None, 0, None, 0)
-            out_t[i] = np.float32(t)
-            out_id[i] = tid
+            store_ray(out_t, out_id, counters, i, np.float32(t), tid, su_, st_, te_, 0, sk_)
             s_steps += st_
             s_tests += te_
-            if counters is not None:
-                counters[i, 0], counters[i, 1], counters[i, 2], counters[i, 3], counters[i, 4] = su_, st_, te_, 0, sk_
         if counters is not None and n_in > 0:  # I[_IDX, :n_in] holds every packet ray (retired ones at the end)
             _spread(counters, n_in, 0, 1, I)
             _spread(counters, n_in, 1, cells, I)

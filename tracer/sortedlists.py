@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer._jit import BLOCK, jit, nblocks, pjit
+from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
@@ -493,14 +493,7 @@ def sl_chunk(lo, hi, O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv
             float(O[i, 0]), float(O[i, 1]), float(O[i, 2]), float(D[i, 0]), float(D[i, 1]), float(D[i, 2]),
             tmin, float(tmax[i]), anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
             st, pend, hp, h_t, h_in, c_pos, c_end, c_slot, c_ax, org, inv, mode)
-        out_t[i] = t
-        out_id[i] = tid
-        if counters is not None:
-            counters[i, 0] = su
-            counters[i, 1] = stp
-            counters[i, 2] = te
-            counters[i, 3] = nv
-            counters[i, 4] = sk
+        store_ray(out_t, out_id, counters, i, t, tid, su, stp, te, nv, sk)
 
 
 @pjit
