@@ -372,7 +372,11 @@ def select_form(forms, X, y, tol: float = 0.10):
 
 
 class _LogForm:
-    """One fitted log-linear form: log y = offset + A b."""
+    """One fitted log-linear form: log y = offset + A b. Predictions do not extrapolate the fitted
+    part: each log-feature is clipped to the range the calibration scenes spanned (a scene far
+    outside it, e.g. a grid ray testing 4,000 triangles where the calibration saw at most 30, gets
+    the estimate at the edge of the calibrated range instead of a power law carried 100x beyond its
+    data); the fixed offset (e.g. log2 N, log t_G) is kept as is."""
 
     def __init__(self, forms, name):
         self.forms, self.name = forms, name
@@ -384,11 +388,14 @@ class _LogForm:
             return self
         A, off = _design_log(form, X)
         self.coef_, _ = _loo_ols(A, _pos_log(y) - off)
+        self.lo_, self.hi_ = A.min(axis=0), A.max(axis=0)
         return self
 
     def predict(self, X):
         A, off = _design_log(self.forms[self.name], X)
-        return np.exp(off + (A @ self.coef_ if len(self.coef_) else 0.0))
+        if not len(self.coef_):
+            return np.exp(off)
+        return np.exp(off + np.clip(A, self.lo_, self.hi_) @ self.coef_)
 
 
 class GridcostEstimator:
