@@ -389,13 +389,28 @@ class _LogForm:
         A, off = _design_log(form, X)
         self.coef_, _ = _loo_ols(A, _pos_log(y) - off)
         self.lo_, self.hi_ = A.min(axis=0), A.max(axis=0)
+        self.off_lo_, self.off_hi_ = float(off.min()), float(off.max())
         return self
+
+    def inside(self, X, margin: float = np.log(2.0)) -> np.ndarray:
+        """Rows of X whose features (and offset) lie within the calibrated range, widened by a
+        factor e^margin (2x) either side; a fixed form is inside everywhere."""
+        A, off = _design_log(self.forms[self.name], X)
+        if not len(self.coef_):
+            return np.ones(len(off), bool)
+        ok = ((A >= self.lo_ - margin) & (A <= self.hi_ + margin)).all(axis=1)
+        return ok & (off >= self.off_lo_ - margin) & (off <= self.off_hi_ + margin)
 
     def predict(self, X):
         A, off = _design_log(self.forms[self.name], X)
         if not len(self.coef_):
             return np.exp(off)
         return np.exp(off + np.clip(A, self.lo_, self.hi_) @ self.coef_)
+
+
+#: t_R^H estimates are capped at this multiple of Eq 8 with the slowest calibration scene's constant:
+#: an order of magnitude above any hierarchy the calibration saw, so only a runaway extrapolation hits it
+CAP_FACTOR = 10.0
 
 
 class GridcostEstimator:
@@ -407,8 +422,9 @@ class GridcostEstimator:
     calibration scenes, keeping the simplest form within ``tol`` of the best (:func:`select_form`)."""
 
     def __init__(self, build_form: str = "auto", ray_form: str = "auto", grid_form: str = "auto",
-                 tol: float = 0.10):
+                 tol: float = 0.10, cap: bool = True):
         self.build_form, self.ray_form, self.grid_form, self.tol = build_form, ray_form, grid_form, tol
+        self.cap = cap
 
     def _choose(self, forms, want, X, y):
         if want != "auto":
@@ -426,6 +442,10 @@ class GridcostEstimator:
         self.grid_ = _LogForm(GRID_FORMS, self.grid_form_).fit(cal, yg)
         self.form_ = f"T_BH = {self.build_form_}; t_RH = {self.ray_form_}; t_RG = {self.grid_form_}"
         self.n_calib_ = len(yb)
+        # the hierarchy's per-ray time does not follow the grid's down a pathological grid (teapot in a
+        # stadium: the grid slows 300x, the kd-tree does not): cap t_RH at CAP_FACTOR times the paper's
+        # Eq 8 with the slowest calibration scene's constant (max t_RH / log2 N)
+        self.cap_k_ = CAP_FACTOR * float(np.max(yr / _log2n(_col(cal, "N")))) if self.cap else np.inf
         return self
 
     @staticmethod
@@ -438,11 +458,14 @@ class GridcostEstimator:
         """(T_BH_est, t_RH_est) for N primitives and the grid ``features`` (mapping or DataFrame)."""
         X, scalar = self._frame(N, features)
         T, t = self.build_.predict(X), self.ray_.predict(X)
+        t = np.minimum(t, self.cap_k_ * _log2n(np.asarray(_col(X, "N"), float)))
         return (float(T[0]), float(t[0])) if scalar else (T, t)
 
     def predict_grid(self, features):
-        """t_R^G estimated from the sampled per-ray time (corrected when the calibration says so)."""
-        t = self.grid_.predict(features)
+        """t_R^G estimated from the sampled per-ray time (corrected when the calibration says so;
+        a scene outside the calibrated range keeps its sample: a measurement is not extrapolated)."""
+        t = np.where(self.grid_.inside(features), self.grid_.predict(features),
+                     np.asarray(_col(features, "t_RG_sample"), float))
         return t if _vector(features) else float(t[0])
 
 
