@@ -61,7 +61,7 @@ def main(args) -> int:
     # the predicted M against the three fastest swept points, timed side by side (paired rounds)
     pp = paired_penalties(scene, "grid", {"pred": {"cells": float(round(m_pred))}},
                           [{"cells": c} for c in fastest(allrows, 3)], rays["random"], store,
-                          rounds=3 if args.quick else 7)["pred"]
+                          quick=args.quick)["pred"]
     out = {
         "scene": scene.name, "N": scene.n, "model": sel["chosen"], "why": sel["why"],
         "tsetup": g.tsetup_, "ts": g.ts_, "ti": g.ti_, "ti_over_ts": g.ti_over_ts_,

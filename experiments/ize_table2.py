@@ -111,7 +111,7 @@ def run(args, log=print) -> dict:
                                                   "8N": {"cells": float(r8.param_cells)},
                                                   "scene_fit": {"cells": float(rs.param_cells)}},
                                   [{"cells": c} for c in fastest(k, 3)], rays[name][kind], store,
-                                  rounds=3 if quick else 7)
+                                  quick=quick)
             entry.update({
                 f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.ns_per_ray,
                 f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": pp["fitted"]["penalty_pct"],

@@ -89,7 +89,7 @@ def run(args, log=print) -> dict:
             pp = paired_penalties(scene, "grid", {"theory": {"cells": float(th.param_cells)},
                                                   "fitted": {"cells": float(fi.param_cells)}},
                                   [{"cells": c} for c in fastest(k, 3)], rays[name][kind], store,
-                                  rounds=3 if quick else 7, others={"8N": ("grid", {"cells": float(lin.param_cells)})})
+                                  quick=quick, others={"8N": ("grid", {"cells": float(lin.param_cells)})})
             e.update({f"empirical_M{sfx}": int(best.cells), f"theory_M{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["theory"]["penalty_pct"],
                       f"penalty_swept_pct{sfx}": penalty_pct(th.ns_per_ray, best.ns_per_ray),

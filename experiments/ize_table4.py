@@ -83,7 +83,7 @@ def run(args, log=print) -> dict:
             one_best = {"cells": float(k1.loc[k1.ns_per_ray.idxmin()].param_cells)}
             pp = paired_penalties(scene, "nested", {"theory": {"levels": 2, "m1": theory, "m2_factor": 8.0}},
                                   [{"levels": 2, "m1": float(m), "m2_factor": 8.0} for m in top], rays[kind], store,
-                                  rounds=3 if quick else 7, others={"one_level": ("grid", one_best)})["theory"]
+                                  quick=quick, others={"one_level": ("grid", one_best)})["theory"]
             e.update({f"empirical_M1{sfx}": int(best.M1), f"empirical_total_cells{sfx}": int(best.cells),
                       f"theory_total_cells{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["penalty_pct"],

@@ -88,8 +88,14 @@ def penalty_pct(t, best) -> float:
     return 100.0 * (t / best - 1.0)
 
 
+#: paired re-timing: rounds x repeats per round (a round times every point once, as a median of
+#: ``repeats`` samples); quick runs use fewer
+PAIRED_ROUNDS, PAIRED_REPEATS = 11, 5
+QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS = 3, 3
+
+
 def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict], rays, store: PointStore,
-                     rounds: int = 7, repeats: int = 3, others: dict | None = None) -> dict:
+                     quick: bool = False, others: dict | None = None) -> dict:
     """Penalty of each of ``targets`` (name -> parameters, e.g. the theory's M) against the best of
     them and ``candidates`` (e.g. the three fastest swept points), re-measured side by side in
     interleaved rounds (:func:`tracer.timing.time_paired`) on one ray set, so the slow drifts of a
@@ -101,6 +107,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
     from tracer.timing import paired_ratio, time_paired
+    rounds, repeats = (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
     points = []
     for p in list(targets.values()) + list(candidates):
         if p not in points:
