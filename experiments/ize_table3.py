@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum
+from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
 from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
 from experiments.sweep import fastest, nearest, paired_penalties, penalty_pct, sweep
 from tracer.rays import make_rays
@@ -61,10 +61,15 @@ def run(args, log=print) -> dict:
     rnd = df[df.ray_kind == "random"]
     cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
     ratio = cfit.ti_over_ts_
+    # one (Ts, Ti) pair for all cylinders, or one per cylinder? (AIC, as table2)
+    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
     extra = []
     for name, scene in scenes.items():
         k = df[(df.scene == name) & (df.ray_kind == "random")]
         pts = [refine_minimum(k.cells, k.ns_per_ray), (scene.n * ratio) ** 1.5]
+        if np.isfinite(scene_ratio[name]) and scene_ratio[name] > 0:
+            pts.append((scene.n * scene_ratio[name]) ** 1.5)
         extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in pts], rays[name], store, repeats,
                        desc=f"table3 {name} (refine)")
     df = pd.concat([df, pd.DataFrame(extra)], ignore_index=True)
@@ -86,14 +91,19 @@ def run(args, log=print) -> dict:
                          "eq5_m_pred": g.optimum()})
             sfx = "" if kind == "random" else f"_{kind}"
             # theory (8N^1.5) and fitted M re-timed side by side with the three fastest swept M and M = 8N
+            sr = scene_ratio[name]
+            fs = nearest(k, (scene.n * sr) ** 1.5) if np.isfinite(sr) and sr > 0 else fi
             pp = paired_penalties(scene, "grid", {"theory": {"cells": float(th.param_cells)},
-                                                  "fitted": {"cells": float(fi.param_cells)}},
+                                                  "fitted": {"cells": float(fi.param_cells)},
+                                                  "scene_fit": {"cells": float(fs.param_cells)}},
                                   [{"cells": c} for c in fastest(k, 3)], rays[name][kind], store,
                                   quick=quick, others={"8N": ("grid", {"cells": float(lin.param_cells)})})
             e.update({f"empirical_M{sfx}": int(best.cells), f"theory_M{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["theory"]["penalty_pct"],
                       f"penalty_swept_pct{sfx}": penalty_pct(th.ns_per_ray, best.ns_per_ray),
                       f"fitted_M{sfx}": int(fi.cells), f"penalty_fitted_pct{sfx}": pp["fitted"]["penalty_pct"],
+                      f"scene_ti_over_ts{sfx}": sr, f"scene_fit_M{sfx}": int(fs.cells),
+                      f"penalty_scene_pct{sfx}": pp["scene_fit"]["penalty_pct"],
                       f"speedup_vs_8N{sfx}": pp["theory"]["speedup"]["8N"],
                       f"size_vs_8N{sfx}": th.memory_bytes / lin.memory_bytes,
                       f"memory_MiB{sfx}": th.memory_bytes / 2**20})
@@ -104,7 +114,7 @@ def run(args, log=print) -> dict:
     write_csv(out_dir / "table3.csv", df)
     write_csv(out_dir / "table3_summary.csv", tab)
     write_csv(out_dir / "fits.csv", fit_df)
-    md = _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads)
+    md = _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool)
     atomic_write(out_dir / "summary.md", md)
     _figure(df, scenes)
     write_meta(out_dir, "table3", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
@@ -113,7 +123,7 @@ def run(args, log=print) -> dict:
     return {"table": tab}
 
 
-def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads) -> str:
+def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
     f = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{int(v):,}"  # noqa: E731
     lines = ["# Table 3 (Ize 2007): long skinny triangles, M = 8N^1.5 vs best swept M", "",
              f"Open cylinders of N long skinny triangles; random rays ({n_rays:,} per point; camera rays second), "
@@ -121,12 +131,18 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads) -> str:
              f"(95 % CI {cfit.ci_['ti_over_ts'][0]:.2f}–{cfit.ci_['ti_over_ts'][1]:.2f}). Penalties and the speed-up "
              "over 8N are re-timed side by side (theory, fitted, M = 8N and the three fastest swept M in "
              "interleaved rounds; median per-round ratio).", "",
-             "| N | empirical M ours (paper) | M = 8N^1.5, penalty ours (paper) | fitted M, penalty | "
+             f"One (Ts, Ti) pair for all cylinders, or one per cylinder? AIC on the relative residuals: pooled "
+             f"{pool['aic_pooled']:.1f}, per cylinder {pool['aic_per_scene']:.1f} — "
+             + ("per-cylinder constants are needed (the per-cylinder column is the model's answer)."
+                if pool["per_scene"] else "the pooled pair is enough."), "",
+             "| N | empirical M ours (paper) | M = 8N^1.5, penalty ours (paper) | fitted M (pooled), penalty | "
+             "per-cylinder fit: Ti/Ts, M, penalty | "
              "speed-up over 8N ours (paper) | size over 8N ours (paper) | memory | camera: empirical M, penalty |",
-             "|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
         lines.append(f"| {r.N:,} | {f(r.empirical_M)} ({f(r.paper_empirical_M)}) | {f(r.theory_M)}, {r.penalty_pct:.1f}% "
-                     f"({r.paper_penalty_pct}%) | {f(r.fitted_M)}, {r.penalty_fitted_pct:.1f}% | {r.speedup_vs_8N:.2f}x "
+                     f"({r.paper_penalty_pct}%) | {f(r.fitted_M)}, {r.penalty_fitted_pct:.1f}% | "
+                     f"{r.scene_ti_over_ts:.2f}, {f(r.scene_fit_M)}, {r.penalty_scene_pct:.1f}% | {r.speedup_vs_8N:.2f}x "
                      f"({r.paper_speedup}x) | {r.size_vs_8N:.0f}x ({r.paper_size}x) | {r.memory_MiB:.1f} MiB | "
                      f"{f(r.empirical_M_camera)}, {r.penalty_pct_camera:.1f}% |")
     lines += ["", "Eq 5 (long-skinny) vs Eq 1 (compact) fit of the same sweeps — the skinny model should fit better:", "",
