@@ -208,6 +208,16 @@ def _span(n, I):
 
 
 @jit(inline="always")
+def _retire(q, i, W, I, out_t, out_id, counters, tested):
+    """Packet slot q (ray i) is done: write its hit, if any, and the packet's triangle tests."""
+    if I[_BID, q] >= 0:
+        out_t[i] = np.float32(W[_BEST, q])
+        out_id[i] = I[_BID, q]
+    if counters is not None:
+        counters[i, 2] = tested
+
+
+@jit(inline="always")
 def _cells(alo, ahi, slo, shi, s0, s1, n):
     """Cells [c0, c1] (clipped to [0, n)) the frustum covers along one axis for k' in [s0, s1]."""
     lo = min(alo + slo * s0, alo + slo * s1)
@@ -471,11 +481,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                             continue
                         retired = True
                         i = I[_IDX, q]
-                        if I[_BID, q] >= 0:
-                            out_t[i] = np.float32(W[_BEST, q])
-                            out_id[i] = I[_BID, q]
-                        if counters is not None:
-                            counters[i, 2] = tested
+                        _retire(q, i, W, I, out_t, out_id, counters, tested)
                         n -= 1
                         if q < n:  # move the last active ray into slot q
                             for row in range(_NW):
@@ -493,12 +499,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                     nlast, nfirst = _span(n, I)
                 s += 1
             for q in range(n):
-                i = I[_IDX, q]
-                if I[_BID, q] >= 0:
-                    out_t[i] = np.float32(W[_BEST, q])
-                    out_id[i] = I[_BID, q]
-                if counters is not None:
-                    counters[i, 2] = tested
+                _retire(q, I[_IDX, q], W, I, out_t, out_id, counters, tested)
         # ---- single-ray fallback: the uniform grid's own kernel
         s_steps = 0
         s_tests = 0
