@@ -43,3 +43,10 @@ def parse_params(items) -> dict:
 def emit_json(obj) -> None:
     json.dump(obj, sys.stdout, indent=None, default=float)
     sys.stdout.write("\n")
+
+
+def scene_list(args, quick_scenes, full_scenes) -> list[str]:
+    """The scenes a target runs: ``--scenes a,b`` when given, else its quick or full default list."""
+    if getattr(args, "scenes", None):
+        return [n.strip() for n in args.scenes.split(",") if n.strip()]
+    return list(quick_scenes if args.quick else full_scenes)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import atomic_write, save_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, write_csv, write_meta
 
 TARGET = "fournier-table1"
 
@@ -373,9 +373,7 @@ def _figure(df):
                     lab.append(ll)
         axes[i][-1].legend(h, lab, fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Fournier & Poulin 1993: sorted event lists vs a 30³ grid, SPD scenes (eye rays)", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, TARGET)
-    plt.close(fig)
+    finish_figure(fig, TARGET)
 
 
 def main(args) -> int:

@@ -14,7 +14,7 @@ import pandas as pd
 
 from costmodel.select import (ERR_CAP, R_VALUES, SAMPLE_SIZES, GridcostEstimator, HapalaEstimator, evaluate,
                               exact_rc, loo_errors, records)
-from experiments.results import atomic_write, save_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, write_csv, write_meta
 
 KIND = {"fig1h": "random", "fig2h": "path"}
 ESTIMATORS = {"paper": HapalaEstimator, "ours": GridcostEstimator}
@@ -355,9 +355,7 @@ def figure(target, kind, ev, sa, floor=None) -> None:
     ax.set(xlabel="cost (s): calibration phase, or the decision's ray sample", ylabel="mean |Err| (%)",
            title="speed against accuracy")
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, target)
-    plt.close(fig)
+    finish_figure(fig, target)
 
 
 def main(args) -> int:

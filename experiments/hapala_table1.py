@@ -19,7 +19,7 @@ import pandas as pd
 
 from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
                               time_stats)
-from experiments.results import REPO, PointStore, atomic_write, save_figure, write_csv, write_json, write_meta
+from experiments.results import PointStore, REPO, atomic_write, finish_figure, write_csv, write_json, write_meta
 from tracer.timing import set_threads
 
 KINDS = ("random", "path")
@@ -410,9 +410,7 @@ def figure(tab: pd.DataFrame) -> None:
         ax.set(xlabel="N (triangles)", ylabel="t_R^G / t_R^H", title=f"{kind} rays (labels: R_C; <1: grid wins)")
         ax.set_yscale("log")
         ax.legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "table1h")
-    plt.close(fig)
+    finish_figure(fig, "table1h")
 
 
 def run(args, log=print) -> dict:

@@ -14,7 +14,7 @@ import pandas as pd
 
 from costmodel.fit import ExponentFit, refine_minimum, work_cost
 from experiments.ize_table3 import cells_sweep
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -186,6 +186,4 @@ def _figure(tab):
     ax.set_xlabel("triangles N")
     ax.set_ylabel("best grid cells M")
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "exponents")
-    plt.close(fig)
+    finish_figure(fig, "exponents")

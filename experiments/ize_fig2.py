@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import GridCostFit
-from experiments.results import atomic_write, save_figure, write_meta
+from experiments.results import atomic_write, finish_figure, write_meta
 
 
 def add_arguments(p) -> None:
@@ -55,9 +55,7 @@ def main(args) -> int:
                      f"{g.ti_:.2f} | {g.ti_over_ts_:.2f} | {g.metrics_['r2']:.3f} | {g.metrics_['mape']:.1f}% |")
     axes[0][0].set_ylabel("time per random ray (ns)", fontsize=8)
     axes[0][0].legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "fig2")
-    plt.close(fig)
+    finish_figure(fig, "fig2")
     lines += ["", "The paper shows the fitted curves 'match very closely'; the MAPE column is how closely ours do."]
     md = "\n".join(lines) + "\n"
     atomic_write(Path(args.out) / "fig2" / "summary.md", md)

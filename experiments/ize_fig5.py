@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.sweep import sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -84,9 +84,7 @@ def main(args) -> int:
         near = df.iloc[int(np.argmin(np.hypot(df.c1 - t1, df.c2 - t2)))]
         lines.append(f"| {name} | {kind} | ({best.c1:g}, {best.c2:g}) | ({t1:.2f}, {t2:g}) ≈ ({near.c1:g}, {near.c2:g}) | "
                      f"{near.pct_over_best:.1f}% |")
-    fig.tight_layout()
-    save_figure(fig, "fig5")
-    plt.close(fig)
+    finish_figure(fig, "fig5")
     out_dir = Path(args.out) / "fig5"
     write_csv(out_dir / "fig5.csv", pd.concat(frames, ignore_index=True))
     lines += ["", "The paper finds its theory point 'usually very close to the optimal point'; the last column is "

@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit
-from experiments.results import atomic_write, save_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, write_csv, write_meta
 
 
 def add_arguments(p) -> None:
@@ -122,6 +122,4 @@ def _figure(cost):
     ax.set_xlabel("calibration scenes")
     ax.set_ylabel("held-out MAPE (%)")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    save_figure(fig, "predict")
-    plt.close(fig)
+    finish_figure(fig, "predict")

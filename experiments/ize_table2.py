@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
 from tracer.constants import IZE_TI_OVER_TS
@@ -46,7 +47,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)  # one pinned thread: per-ray costs without scheduling noise
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER])
+    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
     n_rays = args.rays or (10_000 if quick else 100_000)
     repeats = args.repeats or (5 if not quick else 3)
     factors = QUICK_FACTORS if quick else FULL_FACTORS
@@ -251,9 +252,7 @@ def _figure(df, fit_df, scenes, ratio):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)")
     axes[0][-1].legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "table2")
-    plt.close(fig)
+    finish_figure(fig, "table2")
 
 
 def main(args) -> int:

@@ -11,7 +11,8 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.sweep import fastest, nearest, paired_penalties, penalty_pct, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -44,7 +45,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER])
+    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
     n_rays = args.rays or (5_000 if quick else 50_000)
     repeats = args.repeats or (3 if quick else 5)
     out_dir = Path(args.out) / "table3"
@@ -178,9 +179,7 @@ def _figure(df, scenes):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)")
     axes[0][-1].legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "table3")
-    plt.close(fig)
+    finish_figure(fig, "table3")
 
 
 def main(args) -> int:

@@ -11,7 +11,8 @@ import pandas as pd
 
 from costmodel.fit import refine_minimum
 from experiments.ize_table2 import PAPER as PAPER2
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -49,7 +50,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER2])
+    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER2])
     n_rays = args.rays or (10_000 if quick else 100_000)
     repeats = args.repeats or (3 if quick else 5)
     store = PointStore(args.out, force=args.force)
@@ -157,9 +158,7 @@ def _figure(df, tab):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)", fontsize=8)
     axes[0][-1].legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "table4")
-    plt.close(fig)
+    finish_figure(fig, "table4")
 
 
 def main(args) -> int:

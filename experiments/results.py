@@ -76,6 +76,15 @@ def save_figure(fig, name: str, out_dir=None) -> list[Path]:
     return paths
 
 
+def finish_figure(fig, name: str) -> list[Path]:
+    """Lay out ``fig``, save it (:func:`save_figure`) and close it."""
+    import matplotlib.pyplot as plt
+    fig.tight_layout()
+    paths = save_figure(fig, name)
+    plt.close(fig)
+    return paths
+
+
 def git_commit() -> str:
     try:
         out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,

@@ -20,7 +20,8 @@ import numpy as np
 import pandas as pd
 
 from costmodel.packet import PacketCostFit, best_config
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -160,7 +161,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else SCENES)
+    names = scene_list(args, QUICK_SCENES, SCENES)
     side = args.side or (128 if quick else 512)
     repeats = args.repeats or (5 if quick else 9)  # the curves are flat: more rounds against load noise
     lams = QUICK_LAMBDAS if quick else LAMBDAS
@@ -236,9 +237,7 @@ def _figure(df):
     axes[0].set_ylabel("time / best time")
     axes[1].set_ylabel("ns per ray (dotted: cost model, LOSO)")
     axes[0].legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "wald-fig6")
-    plt.close(fig)
+    finish_figure(fig, "wald-fig6")
 
 
 def main(args) -> int:

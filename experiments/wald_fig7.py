@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import PointStore, atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
 from experiments.wald_fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -53,7 +54,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else SCENES)
+    names = scene_list(args, QUICK_SCENES, SCENES)
     side = args.side or (128 if quick else 512)
     repeats = args.repeats or 5
     out_dir = Path(args.out) / "wald-fig7"
@@ -138,9 +139,7 @@ def _figure(df):
     for ax in axes:
         ax.legend(fontsize=6)
         ax.tick_params(labelsize=7)
-    fig.tight_layout()
-    save_figure(fig, "wald-fig7")
-    plt.close(fig)
+    finish_figure(fig, "wald-fig7")
 
 
 def main(args) -> int:

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import atomic_write, save_figure, write_csv, write_meta
+from experiments.common import scene_list
+from experiments.results import atomic_write, finish_figure, write_csv, write_meta
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -68,7 +69,7 @@ def run(args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads)
     quick = args.quick
-    names = args.scenes.split(",") if args.scenes else (QUICK_SCENES if quick else [p[0] for p in PAPER])
+    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
     side = args.side or (128 if quick else 1024)
     out_dir = Path(args.out) / "wald-table1"
     paper = {p[0]: p for p in PAPER}
@@ -150,9 +151,7 @@ def _figure(df):
     ax.set_xticks(x, df.scene, fontsize=7)
     ax.set_ylabel("ray-triangle tests per ray")
     ax.legend(fontsize=6)
-    fig.tight_layout()
-    save_figure(fig, "wald-table1")
-    plt.close(fig)
+    finish_figure(fig, "wald-table1")
 
 
 def main(args) -> int:
