@@ -17,7 +17,9 @@ from tracer.scene import Scene
 
 N_RAYS = 2000
 VARIANTS = {"exact": dict(exact=True, mailbox=False), "exact-mailbox": dict(exact=True, mailbox=True),
-            "bbox": dict(exact=False, mailbox=False), "bbox-mailbox": dict(exact=False, mailbox=True)}
+            "bbox": dict(exact=False, mailbox=False), "bbox-mailbox": dict(exact=False, mailbox=True),
+            "index": dict(layout="index"), "index-mailbox": dict(layout="index", mailbox=True),
+            "copy": dict(layout="copy")}
 
 _RAYS: dict = {}
 _ORACLE: dict = {}
@@ -511,3 +513,33 @@ def test_grid_axis_aligned_rays_on_cell_planes(bunny):
     ref, ties = oracle_intersect(bunny, o, d)
     res_ = compare(hits, ref, ties)
     assert res_["disagreements"] == 0, res_
+
+
+# ---------------------------------------------------------------- vertex layout
+def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
+    """"auto" reads vertices through the triangle id when the triangles fit in L2 and their
+    cell-order copy would not (long skinny triangles), and keeps the copy otherwise."""
+    from tracer.grid import choose_layout
+    from tracer.scene import load_scene
+    monkeypatch.setenv("GRIDCOST_L2", "1M")
+    assert choose_layout("auto", 3996, 214_196) == "index"  # 144 KiB of triangles, 7.4 MiB copied
+    assert choose_layout("auto", 948, 8_000) == "copy"  # the copy fits in L2 as well
+    assert choose_layout("auto", 69_451, 200_000) == "copy"  # the triangles alone exceed L2
+    assert choose_layout("copy", 3996, 214_196) == "copy"
+    cyl = load_scene("cylinder-3996")
+    grid = UniformGrid(cells=132_651).build(cyl)
+    assert grid.stats()["layout"] == "index" and grid.tri_verts_.shape == (cyl.n, 9)
+    copy = UniformGrid(cells=132_651, layout="copy").build(cyl)
+    assert copy.tri_verts_.shape == (copy.refs_, 9) and copy.refs_ > 30 * cyl.n
+    assert grid.stats()["memory_bytes"] < copy.stats()["memory_bytes"] / 4
+    rays = make_rays(cyl, "random", 3000, seed=3)
+    a, _ = grid.intersect(rays.origins, rays.directions)
+    b, _ = copy.intersect(rays.origins, rays.directions)
+    np.testing.assert_array_equal(a.tri_id, b.tri_id)
+    np.testing.assert_array_equal(a.t, b.t)
+    assert (a.tri_id >= 0).sum() > 1000
+
+
+def test_unknown_layout_is_refused():
+    with pytest.raises(GridcostError, match="layout"):
+        UniformGrid(layout="soa")

@@ -35,6 +35,18 @@ def memory_budget() -> int:
     return int(physical_ram() * MEMORY_BUDGET_FRACTION)
 
 
+def l2_cache_bytes() -> int:
+    """Per-core L2 cache size from sysfs ($GRIDCOST_L2 overrides, e.g. '1M'); 1 MiB if unknown."""
+    env = os.environ.get("GRIDCOST_L2")
+    if env:
+        return _parse_bytes(env)
+    try:
+        with open("/sys/devices/system/cpu/cpu0/cache/index2/size") as f:
+            return _parse_bytes(f.read())
+    except (OSError, ValueError):
+        return 1 << 20
+
+
 def fmt_bytes(n: float) -> str:
     for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
         if abs(n) < 1024 or unit == "TiB":
