@@ -15,8 +15,8 @@ from tracer.rays import make_rays
 from tracer.scene import load_scene
 from tracer.timing import set_threads
 
-SCENES = {"bunny-69k": "compact", "dragon-48k": "compact", "cylinder-3996": "skinny"}
-QUICK = {"bunny-948": "compact", "cylinder-196": "skinny"}
+SCENES = {"bunny-69k": "compact", "dragon-48k": "compact", "capped-cylinder-3996": "skinny"}
+QUICK = {"bunny-948": "compact", "capped-cylinder-196": "skinny"}
 C1 = [0.75, 1.0, 1.25, 1.5, 2.0, 2.5, 3.0]
 C2 = [1.0, 1.5, 2.0, 2.5, 3.0, 4.0]
 THEORY = {"compact": (8 ** 0.2, 2.0), "skinny": (4 ** (1 / 3), 2.0)}

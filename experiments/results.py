@@ -163,8 +163,8 @@ def write_index(out_dir="results") -> Path:
     for d in sorted(p for p in out_dir.iterdir() if p.is_dir() and p.name != "points"):
         summ = d / "summary.md"
         csvs = sorted(d.glob("*.csv")) + sorted(d.glob("*.json"))
-        fig = [f for f in (figs / f"{d.name}.png", figs / f"{d.name}.pdf") if f.exists()]
+        fig = sorted(f for f in figs.glob(f"{d.name}*.p[nd][gf]") if f.stem == d.name or f.stem.startswith(d.name + "_"))
         lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
                      + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs[:6]) or "–") + " | "
-                     + (", ".join(f"[{f.suffix[1:]}](../paper_figs/{f.name})" for f in fig) or "–") + " |")
+                     + (", ".join(f"[{f.name}](../paper_figs/{f.name})" for f in fig) or "–") + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")

@@ -30,6 +30,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
             **{f"param_{k}": v for k, v in params.items()},
             "cells": st.get("cells"), "M1": st.get("M1"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
             "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
+            "layout": st.get("layout"),
             "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds": tm.median, "seconds_min": tm.min,
             "spread": tm.spread, "clock": clock_name(), "ns_per_ray": tm.median / r.n * 1e9,
             **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},

@@ -5,6 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -115,3 +116,25 @@ def test_bad_input_exit_code(tmp_path):
     p = run_cli("table2", "--quick", "--scenes", "no-such-scene", out=tmp_path, check=False)
     assert p.returncode == 2
     assert p.stderr.startswith("error:") and "Traceback" not in p.stderr
+
+
+def test_memprobe_hollow_rays_and_costs():
+    """Hollow rays cross only empty cells (the probe asserts it), and the probed costs are real
+    positive times with a triangle test dearer than an empty step."""
+    from experiments import memprobe
+    from tracer.oracle import oracle_intersect
+    from tracer.rays import make_rays
+    from tracer.scene import load_scene
+    for name in ("capped-cylinder-196", "cylinder-196"):
+        scene = load_scene(name)
+        o, d, tmax = memprobe.hollow_rays(scene, 500, seed=1)
+        ref, _ = oracle_intersect(scene, o, d, tmax=tmax)
+        assert (ref.tri_id == -1).all()
+        assert (tmax > 1.5).all() and np.allclose(np.linalg.norm(d, axis=1), 1, atol=1e-6)
+    scene = load_scene("capped-cylinder-196")
+    c = memprobe.memory_free_costs(scene, make_rays(scene, "random", 1000, seed=0), n_hollow=5000, quick=True)
+    assert c["T0_ns"] > 0 and c["Ts_empty_ns"] > 0 and c["Ti_ns"] > c["Ts_empty_ns"]
+    rows = pd.DataFrame({"steps": [10.0], "tests": [2.0], "ns_per_ray": [500.0]})
+    model = c["T0_ns"] + 10 * c["Ts_empty_ns"] + 2 * c["Ti_ns"]
+    assert memprobe.model_ns(rows, c)[0] == pytest.approx(model)
+    assert memprobe.excess(rows, c)[0] == pytest.approx(500.0 - model)

@@ -131,6 +131,25 @@ def test_cylinder_196_long_skinny():
     assert set(np.unique(t[:, :, 2])) == {-1.0, 1.0}
 
 
+@pytest.mark.parametrize("n", [196, 3996])
+def test_capped_cylinder_is_izes_closed_cylinder(n):
+    """N/4 segments: 2 side triangles spanning the height and one fan triangle per cap, all long and
+    skinny, and the surface closed (every edge shared by exactly two triangles)."""
+    scene = load_scene(f"capped-cylinder-{n}")
+    assert scene.n == n
+    t = scene.tris.astype(np.float64)
+    z = t[:, :, 2]
+    side = np.ptp(z, axis=1) == 2.0
+    assert side.sum() == n // 2 and (z[~side] == -1.0).sum() == 3 * n // 4 and (z[~side] == 1.0).sum() == 3 * n // 4
+    edges = np.linalg.norm(t[:, [1, 2, 0]] - t, axis=2)
+    assert (edges.max(1) / edges.min(1) > 5).all()
+    _, vid = np.unique(np.round(t.reshape(-1, 3), 6), axis=0, return_inverse=True)
+    vid = vid.reshape(-1, 3)
+    pairs = np.sort(np.stack([vid, vid[:, [1, 2, 0]]], axis=2).reshape(-1, 2), axis=1)
+    _, counts = np.unique(pairs, axis=0, return_counts=True)
+    assert len(counts) == 3 * n // 2 and (counts == 2).all()
+
+
 @pytest.mark.parametrize("models", ["teapot", "sphere-fallback"])
 def test_teapot_in_stadium_camera_sees_the_teapot(models, monkeypatch):
     """teapot-in-stadium has a view (a close-up of the teapot): its camera stands inside the stadium and

@@ -20,7 +20,7 @@ from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_setup, ray_box, ray_triangle, tri_box_overlap
-from tracer.memory import check_budget, l2_cache_bytes
+from tracer.memory import cache_bytes, check_budget
 
 #: direct-mapped mailbox entries per thread (power of two)
 MAILBOX = 32
@@ -60,7 +60,7 @@ def choose_layout(layout: str, n_tris: int, refs: int) -> str:
     561 ns per random ray); compact meshes keep the copy (bunny-69k at 8N: index 9 % slower)."""
     if layout != "auto":
         return layout
-    l2 = l2_cache_bytes()
+    l2 = cache_bytes(2)
     return "index" if n_tris * 36 <= l2 < refs * 36 else "copy"
 
 

@@ -35,16 +35,25 @@ def memory_budget() -> int:
     return int(physical_ram() * MEMORY_BUDGET_FRACTION)
 
 
-def l2_cache_bytes() -> int:
-    """Per-core L2 cache size from sysfs ($GRIDCOST_L2 overrides, e.g. '1M'); 1 MiB if unknown."""
-    env = os.environ.get("GRIDCOST_L2")
+def cache_bytes(level: int = 2) -> int:
+    """Size of cpu0's level-``level`` data/unified cache from sysfs ($GRIDCOST_L2 / $GRIDCOST_L3
+    override, e.g. '1M'); 1 MiB (L2) or 32 MiB (L3) when unknown."""
+    env = os.environ.get(f"GRIDCOST_L{level}")
     if env:
         return _parse_bytes(env)
+    base = "/sys/devices/system/cpu/cpu0/cache"
     try:
-        with open("/sys/devices/system/cpu/cpu0/cache/index2/size") as f:
-            return _parse_bytes(f.read())
+        for entry in sorted(os.listdir(base)):
+            with open(f"{base}/{entry}/level") as f:
+                lev = int(f.read())
+            with open(f"{base}/{entry}/type") as f:
+                kind = f.read().strip()
+            if lev == level and kind in ("Data", "Unified"):
+                with open(f"{base}/{entry}/size") as f:
+                    return _parse_bytes(f.read())
     except (OSError, ValueError):
-        return 1 << 20
+        pass
+    return 1 << 20 if level <= 2 else 32 << 20
 
 
 def fmt_bytes(n: float) -> str:

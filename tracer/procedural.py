@@ -2,7 +2,9 @@
 
 ==========================  ================================================================
 ``cylinder-N``              open cylinder of N long skinny triangles, one ring of quads
-                            (Ize 2007 Table 3: N = 196, 3996, 19996)
+``capped-cylinder-N``       Ize 2007's cylinder (Table 3, Fig 5, Fig 6): N/4 segments, each a side
+                            quad spanning the whole height (2 triangles) and one triangle in each
+                            end cap's fan, all long and skinny (N = 196, 3996, 19996)
 ``particles-N``             N small triangles scattered uniformly in a unit cube ("exploding
                             particles", Ize 2007 Sec 4.3: scattered data)
 ``teapot-in-stadium``       the teapot mesh inside a box 200x its size (the classic grid failure);
@@ -30,6 +32,7 @@ from tracer.errors import GridcostError
 
 PATTERNS = {
     "cylinder": re.compile(r"^cylinder-(\d+)$"),
+    "capped_cylinder": re.compile(r"^capped-cylinder-(\d+)$"),
     "particles": re.compile(r"^particles-(\d+)(k?)$"),
     "sphere": re.compile(r"^sphere-(\d+)(k?)$"),
     "knot": re.compile(r"^knot-(\d+)(k?)$"),
@@ -37,7 +40,7 @@ PATTERNS = {
     "surfpoints": re.compile(r"^surfpoints-(\d+)(k?)$"),
 }
 FIXED = ("teapot-in-stadium", "room")
-EXAMPLES = ["cylinder-196", "cylinder-3996", "cylinder-19996", "particles-100k", "teapot-in-stadium",
+EXAMPLES = ["cylinder-196", "cylinder-3996", "cylinder-19996", "capped-cylinder-3996", "particles-100k", "teapot-in-stadium",
             "room", "sphere-20k", "knot-50k", "boxes-2000"]
 
 
@@ -96,6 +99,23 @@ def cylinder(n: int) -> np.ndarray:
     ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     P = np.stack([np.concatenate([ring, np.full((k + 1, 1), z)], axis=1) for z in (-1.0, 1.0)], axis=1)
     return _grid_mesh(P)
+
+
+def capped_cylinder(n: int) -> np.ndarray:
+    """Closed cylinder (radius 1, height 2) as Ize 2007 built it: k = N // 4 segments, each a side
+    quad spanning the whole height (2 triangles) and a fan triangle (centre, rim, rim) in each cap,
+    so N = 4k triangles (196 = 4 x 49)."""
+    k = max(3, n // 4)
+    side = cylinder(2 * k)
+    ang = np.linspace(0, 2 * np.pi, k + 1)
+    ang[-1] = 0.0
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    caps = []
+    for z in (-1.0, 1.0):
+        rim = np.concatenate([ring, np.full((k + 1, 1), z)], axis=1)
+        centre = np.broadcast_to([0.0, 0.0, z], (k, 3))
+        caps.append(np.stack([centre, rim[:-1], rim[1:]], axis=1))
+    return np.concatenate([side, *caps]).astype(np.float32)
 
 
 def particles(n: int, seed: int = 1) -> np.ndarray:
