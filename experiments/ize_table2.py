@@ -214,8 +214,9 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
               f"as the AIC chose) costs at most {worst_fit:.1f} %. "
               f"Our Ti/Ts ({ratio:.2f}) differs from the paper's 4 because a step and a test cost "
               "different amounts on this CPU and in this tracer (Numba, float64 Moeller-Trumbore on float32 "
-              "data, triangles copied into cell order so a test is mostly arithmetic, while a step pays a "
-              "branchy DDA update and two index loads). " + _verdict(worst, worst_fit) +
+              "data, so a test is mostly arithmetic, while a step pays a branchy DDA update and, in an occupied "
+              "cell, loads from a structure that may not fit the caches: table3's memory split measures how much "
+              "that costs as a grid grows). " + _verdict(worst, worst_fit) +
               " Dragon and room stand in for Buddha and the conference room, so their N and M differ from "
               "the paper's rows by construction.", "",
               f"Noise: the swept points scatter about the fitted Eq 1 curve by {noise:.1f} % (median MAPE below), "

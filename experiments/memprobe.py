@@ -45,6 +45,7 @@ def hollow_rays(scene, n: int, seed: int = 0):
 
 def memory_free_costs(scene, random_rays, n_hollow: int = 20_000, n_test: int = 1_000, quick: bool = False) -> dict:
     """T0, Ts (empty step) and Ti (ns) of ``scene`` measured in this run (see the module doc)."""
+    n_hollow = min(n_hollow, 5_000) if quick else n_hollow
     o, d, tmax = hollow_rays(scene, n_hollow)
     fns, counts = {}, {}
     for cells in PROBE_CELLS:
