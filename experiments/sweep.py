@@ -107,7 +107,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     like a sweep point (resumable). ``others`` (name -> (structure, parameters), e.g. the best
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
-    from tracer.timing import paired_ratio, time_paired
+    from tracer.timing import paired_ratio
     rounds, repeats = (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
     points = []
     for p in list(targets.values()) + list(candidates):
@@ -119,11 +119,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     done = store.get(spec)
     if done is not None:
         return done
-    accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
-    for name, (st, p) in (others or {}).items():
-        accels[name] = build(scene, st, **p)
-    tp = time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
-                      for i, a in accels.items()}, rounds=rounds, repeats=repeats)
+    tp = _time_side_by_side(scene, structure, points, rays, rounds, repeats, others)
     med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
     best = min(med, key=med.get)
     out = {}
@@ -136,6 +132,33 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
                      "speedup": {o: paired_ratio(tp, o, i)[0] for o in (others or {})}}
     store.put(spec, out)
     return out
+
+
+def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None) -> dict:
+    """Build every point (index -> structure) and each of ``others`` (name -> (structure, params)),
+    then time them all in interleaved rounds: index or name -> per-round seconds."""
+    from tracer.timing import time_paired
+    accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
+    for name, (st, p) in (others or {}).items():
+        accels[name] = build(scene, st, **p)
+    return time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
+                        for i, a in accels.items()}, rounds=rounds, repeats=repeats)
+
+
+def paired_plane(scene, structure: str, points: list[dict], rays, store: PointStore, quick: bool = False) -> np.ndarray:
+    """% time over the best of every point of a parameter plane (e.g. Fig 5's (m1, m2) factors),
+    all timed side by side in interleaved rounds: per round each point's time over that round's
+    fastest, then the median over rounds. Drift between rounds cancels, which a sweep's points,
+    measured minutes apart, do not have. Stored in ``store`` (resumable)."""
+    rounds, repeats = (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
+    spec = {"paired_plane": 1, "scene": scene.name, "N": scene.n, "structure": structure, "points": points,
+            "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats}
+    done = store.get(spec)
+    if done is None:
+        tp = _time_side_by_side(scene, structure, points, rays, rounds, repeats)
+        t = np.array([tp[i] for i in range(len(points))])  # (points, rounds)
+        done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()})
+    return np.asarray(done["pct_over_best"])
 
 
 def fastest(rows_df, k: int = 3) -> list[float]:
