@@ -185,3 +185,17 @@ def dda_setup(ox, oy, oz, dx, dy, dz, t, x0, y0, z0, cx, cy, cz, icx, icy, icz, 
     iy, sy, tny, tdy = _dda_axis(oy, dy, t, y0, cy, icy, ny)
     iz, sz, tnz, tdz = _dda_axis(oz, dz, t, z0, cz, icz, nz)
     return ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz
+
+
+@jit(inline="always")
+def dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz):
+    """The stepping form of a DDA state: flat cell index c = ix + nx (iy + ny iz), the cells left
+    before the ray leaves the grid on each axis (l*), and the signed index stride per axis (cd*).
+    A step on axis x is then ``lx -= 1; c += cdx`` (leaving when lx == 0): no bounds checks and no
+    index multiply per step."""
+    nxy = nx * ny
+    c = ix + nx * iy + nxy * iz
+    lx = nx - 1 - ix if sx > 0 else ix
+    ly = ny - 1 - iy if sy > 0 else iy
+    lz = nz - 1 - iz if sz > 0 else iz
+    return c, lx, ly, lz, sx, sy * nx, sz * nxy

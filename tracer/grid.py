@@ -19,7 +19,7 @@ from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
-from tracer.geometry import INF, dda_setup, ray_box, ray_triangle, tri_box_overlap
+from tracer.geometry import INF, dda_cursor, dda_setup, ray_box, ray_triangle, tri_box_overlap
 from tracer.memory import cache_bytes, check_budget
 
 #: direct-mapped mailbox entries per thread (power of two)
@@ -148,14 +148,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
             mb[chunk, h] = -1
     # the cell index moves by a signed stride per axis; l* counts the cells left before the ray
     # leaves the grid on that axis (replaces two bounds checks and the index multiply per step)
-    nxy = nx * ny
-    c = ix + nx * iy + nxy * iz
-    lx = nx - 1 - ix if sx > 0 else ix
-    ly = ny - 1 - iy if sy > 0 else iy
-    lz = nz - 1 - iz if sz > 0 else iz
-    cdx = sx
-    cdy = sy * nx
-    cdz = sz * nxy
+    c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz)
     # best starts at tmax: leaving a cell at t >= best (hit found, or beyond tmax) ends the ray
     best = np.float64(tmax)
     best_ref = -1
@@ -183,10 +176,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
                         ox, oy, oz, dx, dy, dz, te, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
                         gp[6], gp[7], gp[8], nx, ny, nz)
-                    c = ix + nx * iy + nxy * iz
-                    lx = nx - 1 - ix if sx > 0 else ix
-                    ly = ny - 1 - iy if sy > 0 else iy
-                    lz = nz - 1 - iz if sz > 0 else iz
+                    c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz)
                     continue
         cu = np.uintp(c)
         steps += 1

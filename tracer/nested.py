@@ -34,7 +34,7 @@ from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
-from tracer.geometry import INF, dda_setup, ray_box, ray_triangle
+from tracer.geometry import INF, dda_cursor, dda_setup, ray_box, ray_triangle
 from tracer.grid import grid_assign, grid_params, res_from_cells
 from tracer.memory import check_budget
 
@@ -97,7 +97,7 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                sti, stf, lvl, ray):
     """Trace one ray through a nested grid: closest hit (or any hit when ``anyhit``).
 
-    ``sti``/``stf`` are the (levels, 10) int and (levels, 7) float stacks of suspended DDA states; ``lvl`` is the
+    ``sti``/``stf`` are the (levels, 7) int and (levels, 7) float stacks of suspended DDA states; ``lvl`` is the
     (m, levels, 3) per-level counter array or None (compiled out). Returns
     (t, tri_id, setups, steps, tests, nodes)."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, GF[0, 0], GF[0, 1], GF[0, 2], GF[0, 9], GF[0, 10],
@@ -105,10 +105,12 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
     if t0 > t1:
         return INF, -1, 0, 0, 0, 0
     depth = 0
-    nx = GI[0, 0]; ny = GI[0, 1]; nz = GI[0, 2]; off = GI[0, 3]
     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
         ox, oy, oz, dx, dy, dz, t0, GF[0, 0], GF[0, 1], GF[0, 2], GF[0, 3], GF[0, 4], GF[0, 5],
-        GF[0, 6], GF[0, 7], GF[0, 8], nx, ny, nz)
+        GF[0, 6], GF[0, 7], GF[0, 8], GI[0, 0], GI[0, 1], GI[0, 2])
+    # stepping form (see geometry.dda_cursor); c is offset into the flat cells_ of all grids
+    c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, GI[0, 0], GI[0, 1], GI[0, 2])
+    c += GI[0, 3]
     tend = t1          # exit parameter of the current grid
     tenter = t0        # entry parameter of the current cell
     setups = 1
@@ -120,26 +122,27 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
     best = np.float64(tmax)
     best_id = -1
     while True:
-        c = np.uintp(off + ix + nx * (iy + ny * iz))
+        cu = np.uintp(c)
         steps += 1
         if lvl is not None:
             lvl[ray, depth, 1] += 1
-        a = cells[c, np.uintp(0)]
-        b = cells[c, np.uintp(1)]
+        a = cells[cu, np.uintp(0)]
+        b = cells[cu, np.uintp(1)]
         if a < 0:
             # descend: suspend this DDA, run the same loop in the child over this cell's interval
             texit = min(tnx, tny, tnz, tend)
-            sti[depth, 0] = off; sti[depth, 1] = ix; sti[depth, 2] = iy; sti[depth, 3] = iz
-            sti[depth, 4] = sx; sti[depth, 5] = sy; sti[depth, 6] = sz
-            sti[depth, 7] = nx; sti[depth, 8] = ny; sti[depth, 9] = nz
+            sti[depth, 0] = c; sti[depth, 1] = lx; sti[depth, 2] = ly; sti[depth, 3] = lz
+            sti[depth, 4] = cdx; sti[depth, 5] = cdy; sti[depth, 6] = cdz
             stf[depth, 0] = tnx; stf[depth, 1] = tny; stf[depth, 2] = tnz
             stf[depth, 3] = tdx; stf[depth, 4] = tdy; stf[depth, 5] = tdz; stf[depth, 6] = tend
             depth += 1
             g = -a - 1
-            nx = GI[g, 0]; ny = GI[g, 1]; nz = GI[g, 2]; off = GI[g, 3]
+            nx = GI[g, 0]; ny = GI[g, 1]; nz = GI[g, 2]
             ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
                 ox, oy, oz, dx, dy, dz, tenter, GF[g, 0], GF[g, 1], GF[g, 2], GF[g, 3], GF[g, 4],
                 GF[g, 5], GF[g, 6], GF[g, 7], GF[g, 8], nx, ny, nz)
+            c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz)
+            c += GI[g, 3]
             tend = texit
             setups += 1
             nodes += 1
@@ -161,42 +164,43 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                     return best, best_id, setups, steps, tests, nodes
         if lvl is not None:
             lvl[ray, depth, 2] += b - a if b > a else 0
-        # step to the next cell; leaving a grid pops the parent and steps it on
+        # step to the next cell; leaving a grid (its cells-left counter at 0, or past the parent
+        # cell's exit) pops the parent and steps it on
         done = False
         while True:
             leave = False
             if tnx < tny:
                 if tnx < tnz:
-                    if best <= tnx or tnx > tend:
+                    if best <= tnx or tnx > tend or lx == 0:
                         leave = True
                     else:
-                        ix += sx
-                        leave = ix < 0 or ix >= nx
+                        lx -= 1
+                        c += cdx
                         tenter = tnx
                         tnx += tdx
                 else:
-                    if best <= tnz or tnz > tend:
+                    if best <= tnz or tnz > tend or lz == 0:
                         leave = True
                     else:
-                        iz += sz
-                        leave = iz < 0 or iz >= nz
+                        lz -= 1
+                        c += cdz
                         tenter = tnz
                         tnz += tdz
             else:
                 if tny < tnz:
-                    if best <= tny or tny > tend:
+                    if best <= tny or tny > tend or ly == 0:
                         leave = True
                     else:
-                        iy += sy
-                        leave = iy < 0 or iy >= ny
+                        ly -= 1
+                        c += cdy
                         tenter = tny
                         tny += tdy
                 else:
-                    if best <= tnz or tnz > tend:
+                    if best <= tnz or tnz > tend or lz == 0:
                         leave = True
                     else:
-                        iz += sz
-                        leave = iz < 0 or iz >= nz
+                        lz -= 1
+                        c += cdz
                         tenter = tnz
                         tnz += tdz
             if not leave:
@@ -205,9 +209,8 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                 done = True
                 break
             depth -= 1
-            off = sti[depth, 0]; ix = sti[depth, 1]; iy = sti[depth, 2]; iz = sti[depth, 3]
-            sx = sti[depth, 4]; sy = sti[depth, 5]; sz = sti[depth, 6]
-            nx = sti[depth, 7]; ny = sti[depth, 8]; nz = sti[depth, 9]
+            c = sti[depth, 0]; lx = sti[depth, 1]; ly = sti[depth, 2]; lz = sti[depth, 3]
+            cdx = sti[depth, 4]; cdy = sti[depth, 5]; cdz = sti[depth, 6]
             tnx = stf[depth, 0]; tny = stf[depth, 1]; tnz = stf[depth, 2]
             tdx = stf[depth, 3]; tdy = stf[depth, 4]; tdz = stf[depth, 5]; tend = stf[depth, 6]
         if done:
@@ -224,7 +227,7 @@ def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
     thread. ``counters`` (m, 5) and ``lvl`` (m, levels, 3) are arrays or None (compiled out)."""
     m = O.shape[0]
     for th in prange(nt):
-        sti = np.empty((levels, 10), np.int64)
+        sti = np.empty((levels, 7), np.int64)
         stf = np.empty((levels, 7), np.float64)
         for b in range(th, nblocks(m), nt):
             for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
