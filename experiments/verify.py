@@ -79,16 +79,18 @@ def _many(args, kinds, structure: str) -> int:
              "disagreements": sum(o["disagreements"] for o in outs), "ties": sum(o["ties"] for o in outs),
              "scenes": outs}
     d = Path(args.out) / "verify"
-    write_json(d / f"{structure}.json", total)
-    lines = [f"# Oracle agreement: {structure}", "",
+    params = parse_params(args.param)
+    tag = "-".join([structure] + [f"{k}-{v}" for k, v in params.items()])  # e.g. grid-layout-index
+    write_json(d / f"{tag}.json", total)
+    lines = [f"# Oracle agreement: {structure} {params or ''}", "",
              f"Every ray traced with `{structure}` and with the float64 brute-force oracle; ray kinds: "
              f"{', '.join(kinds)}; {args.rays:,} rays per kind and scene (seed {args.seed}).", "",
-             "| scene | faces | rays | hits | disagreements | ties |", "|---|---|---|---|---|---|"]
-    lines += [f"| {o['scene']} | {o['faces']:,} | {o['rays']:,} | {o['hits']:,} | {o['disagreements']} | {o['ties']} |"
-              for o in outs]
+             "| scene | faces | rays | hits | disagreements | ties | layout |", "|---|---|---|---|---|---|---|"]
+    lines += [f"| {o['scene']} | {o['faces']:,} | {o['rays']:,} | {o['hits']:,} | {o['disagreements']} | {o['ties']} | "
+              f"{o['stats'].get('layout', '–')} |" for o in outs]
     lines += ["", f"Total: {total['rays']:,} rays, {total['disagreements']} disagreements, {total['ties']} ties "
               "(a different triangle at the same t: duplicate faces, shared edges)."]
-    atomic_write(d / f"summary-{structure}.md", "\n".join(lines) + "\n")
+    atomic_write(d / f"summary-{tag}.md", "\n".join(lines) + "\n")
     if args.json:
         emit_json(total)
     else:
