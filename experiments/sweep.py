@@ -9,20 +9,44 @@ from tqdm import tqdm
 
 from experiments.results import PointStore
 from tracer.accel import build
-from tracer.timing import clock_name, time_call
+from tracer.timing import clock_name, time_paired
 
 QUICK_FACTORS = [2.0**k for k in range(-3, 7)]              # N/8 ... 64N, 10 points
 FULL_FACTORS = [2.0 ** (k / 2) for k in range(-6, 13)]      # N/8 ... 64N, 19 points
 
 
+#: the drift meter every sweep point is timed beside: a one-level grid of 8N cells on the same scene
+REFERENCE = ("grid", {"factor": 8.0})
+_REF_CACHE: dict = {}
+
+
+def _reference(scene):
+    """The scene's reference structure (built once per process)."""
+    key = (scene.name, scene.n)
+    if key not in _REF_CACHE:
+        _REF_CACHE.clear()  # one scene at a time: large references are not kept around
+        _REF_CACHE[key] = build(scene, REFERENCE[0], **REFERENCE[1])
+    return _REF_CACHE[key]
+
+
 def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: int = 5) -> list[dict]:
-    """Build once; for each ray kind time ``repeats`` traces (after a warm-up) and count work."""
+    """Build once; for each ray kind time the point and the scene's reference structure
+    (:data:`REFERENCE`) side by side in ``repeats`` interleaved rounds (after a warm-up), and count
+    work. Rows carry the point's own median (``seconds_raw``) and its median per-round ratio to the
+    reference (``ratio_to_ref``): the ratio does not drift with the machine, which on a shared VM
+    changes speed by 10-30 % between points timed minutes apart (:func:`sweep` turns it back into
+    seconds)."""
     import numba
     accel = build(scene, structure, **params)
+    ref = _reference(scene)
     st = accel.stats()
     rows = []
     for kind, r in rays_by_kind.items():
-        tm = time_call(lambda: accel.intersect(r.origins, r.directions, counters=False), repeats=repeats)
+        tp = time_paired({"p": lambda: accel.intersect(r.origins, r.directions, counters=False),
+                          "r": lambda: ref.intersect(r.origins, r.directions, counters=False)},
+                         rounds=repeats, repeats=1)
+        p, q = np.asarray(tp["p"]), np.asarray(tp["r"])
+        med = float(np.median(p))
         _, cnt = accel.intersect(r.origins, r.directions, counters=True)
         mean = cnt.mean()
         rows.append({
@@ -31,13 +55,31 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
             "cells": st.get("cells"), "M1": st.get("M1"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
             "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
             "layout": st.get("layout"),
-            "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds": tm.median, "seconds_min": tm.min,
-            "spread": tm.spread, "clock": clock_name(), "ns_per_ray": tm.median / r.n * 1e9,
+            "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds_raw": med, "seconds_min": float(p.min()),
+            "spread": float((p.max() - p.min()) / med), "ref_seconds": float(np.median(q)),
+            "ratio_to_ref": float(np.median(p / q)), "clock": clock_name(), "ns_per_ray_raw": med / r.n * 1e9,
             **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},
             "hits": float((accel.intersect(r.origins[:2000], r.directions[:2000], counters=False)[0].tri_id >= 0).mean()),
             "threads": numba.get_num_threads(), "worker": socket.gethostname(),
         })
     return rows
+
+
+def _anchor(store: PointStore, scene, rays_by_kind: dict, rows: list[dict]) -> dict:
+    """Per (worker, ray kind): the reference's seconds that ratios are turned back into seconds with.
+    Fixed the first time a scene's points are measured (the median reference time of that sweep) and
+    stored, so later sweeps of the same scene (refinement points, other targets) share it."""
+    out = {}
+    for worker in sorted({r["worker"] for r in rows}):
+        spec = {"reference": list(REFERENCE), "scene": scene.name, "N": scene.n, "worker": worker,
+                "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}}
+        got = store.get(spec)
+        if got is None:
+            got = store.put(spec, {k: float(np.median([r["ref_seconds"] for r in rows
+                                                        if r["worker"] == worker and r["ray_kind"] == k]))
+                                   for k in rays_by_kind})
+        out[worker] = got
+    return out
 
 
 def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, store: PointStore,
@@ -50,7 +92,7 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
     for params in param_list:
         spec = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
                 "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
-                **(extra_key or {})}
+                "timing": "beside-reference", **(extra_key or {})}
         keys.append(spec)
         if store.get(spec) is None:
             specs.append(spec)
@@ -63,7 +105,11 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
         bar.close()
     out = []
     for spec in keys:
-        out.extend(store.get(spec, ignore_force=True)["rows"])
+        out.extend(dict(r) for r in store.get(spec, ignore_force=True)["rows"])
+    anchor = _anchor(store, scene, rays_by_kind, out)
+    for r in out:  # drift-free time: ratio to the reference x the reference's anchored time
+        r["seconds"] = r["ratio_to_ref"] * anchor[r["worker"]][r["ray_kind"]]
+        r["ns_per_ray"] = r["seconds"] / r["rays"] * 1e9
     return out
 
 

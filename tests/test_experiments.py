@@ -138,3 +138,44 @@ def test_memprobe_hollow_rays_and_costs():
     model = c["T0_ns"] + 10 * c["Ts_empty_ns"] + 2 * c["Ti_ns"]
     assert memprobe.model_ns(rows, c)[0] == pytest.approx(model)
     assert memprobe.excess(rows, c)[0] == pytest.approx(500.0 - model)
+
+
+def test_paired_timing_of_points_and_planes(tmp_path):
+    """Side-by-side timing: penalties are relative to the fastest point (>= 0 up to round noise, a
+    clearly worse grid costs more), results are stored and a rerun returns them unchanged."""
+    from experiments.sweep import paired_penalties, paired_plane
+    from tracer.rays import make_rays
+    from tracer.scene import load_scene
+    scene = load_scene("bunny-948")
+    rays = make_rays(scene, "random", 3000, seed=0)
+    store = PointStore(tmp_path)
+    points = [{"cells": 8.0 * scene.n}, {"cells": 1.0}, {"cells": 64.0 * scene.n}]
+    pct = paired_plane(scene, "grid", points, rays, store, quick=True)
+    assert pct.shape == (3,) and (pct >= 0).all()
+    assert pct[1] > 100  # one cell: every ray tests every triangle
+    assert pct.min() < 5
+    np.testing.assert_array_equal(paired_plane(scene, "grid", points, rays, PointStore(tmp_path), quick=True), pct)
+    pen = paired_penalties(scene, "grid", {"one": points[1]}, [points[0]], rays, store, quick=True)
+    assert pen["one"]["penalty_pct"] > 100 and pen["one"]["best_params"] == points[0]
+    assert paired_penalties(scene, "grid", {"one": points[1]}, [points[0]], rays, store, quick=True) == pen
+
+
+def test_sweep_times_points_beside_a_reference(tmp_path):
+    """Every sweep point is timed beside the scene's 8N grid: the reference configuration itself
+    comes out at a ratio of ~1, times are ratio x one stored anchor, and a later sweep of the same
+    scene (refinement points) reuses that anchor."""
+    from experiments.sweep import REFERENCE, sweep
+    from tracer.rays import make_rays
+    from tracer.scene import load_scene
+    scene = load_scene("bunny-948")
+    rays = {"random": make_rays(scene, "random", 3000, seed=0)}
+    store = PointStore(tmp_path)
+    rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 3)
+    ref, one = rows
+    assert 0.8 < ref["ratio_to_ref"] < 1.25
+    assert one["ratio_to_ref"] > 3  # one cell: every ray tests every triangle
+    anchor = ref["seconds"] / ref["ratio_to_ref"]
+    assert one["seconds"] == pytest.approx(one["ratio_to_ref"] * anchor)
+    assert one["ns_per_ray"] == pytest.approx(one["seconds"] / 3000 * 1e9)
+    more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, PointStore(tmp_path), 3)
+    assert more[0]["seconds"] == pytest.approx(more[0]["ratio_to_ref"] * anchor)
