@@ -146,8 +146,8 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     """Penalty of each of ``targets`` (name -> parameters, e.g. the theory's M) against the best of
     them and ``candidates`` (e.g. the three fastest swept points), re-measured side by side in
     interleaved rounds (:func:`tracer.timing.time_paired`) on one ray set, so the slow drifts of a
-    shared machine cancel: a sweep measures its points minutes apart, and drift of that size (10-20 %
-    here) shows up as a penalty. The best is the fastest point by median time; a target's penalty is
+    shared machine cancel, and the points are compared directly rather than through the reference
+    each sweep point was timed beside. The best is the fastest point by median time; a target's penalty is
     the median over rounds of its per-round ratio to the best (0 for the best itself). Returns name
     -> {penalty_pct, min_pct, max_pct, target_ns, best_ns, best_params, speedup}; stored in ``store``
     like a sweep point (resumable). ``others`` (name -> (structure, parameters), e.g. the best
