@@ -20,6 +20,7 @@ def remember_scene(scene) -> None:
 def run_point(spec: dict) -> tuple[dict, list[dict]]:
     """Measure one sweep point from its spec (runs on a worker or locally). Returns (spec, rows)."""
     from experiments.sweep import measure
+    from tracer.timing import MIN_SAMPLE_SECONDS
     from tracer.rays import make_rays
     from tracer.scene import load_scene
     scene = _SCENES.get(spec["scene"]) or load_scene(spec["scene"])
@@ -28,7 +29,8 @@ def run_point(spec: dict) -> tuple[dict, list[dict]]:
     if spec.get("threads"):
         from tracer.timing import set_threads
         set_threads(spec["threads"])
-    return spec, measure(scene, spec["structure"], spec["params"], rays, spec["repeats"])
+    return spec, measure(scene, spec["structure"], spec["params"], rays, spec["repeats"],
+                         spec.get("min_sample", MIN_SAMPLE_SECONDS))
 
 
 class LocalExecutor:

@@ -90,7 +90,9 @@ def main(argv: list[str] | None = None) -> int:
         import numba
         numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
     from experiments.results import set_output
+    from experiments.sweep import set_quick
     set_output(args.out)
+    set_quick(getattr(args, "quick", False))
     try:
         if args.dask:
             from experiments.executor import set_executor

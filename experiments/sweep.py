@@ -9,7 +9,7 @@ from tqdm import tqdm
 
 from experiments.results import PointStore
 from tracer.accel import build
-from tracer.timing import clock_name, time_paired
+from tracer.timing import MIN_SAMPLE_SECONDS, clock_name, time_paired
 
 QUICK_FACTORS = [2.0**k for k in range(-3, 7)]              # N/8 ... 64N, 10 points
 FULL_FACTORS = [2.0 ** (k / 2) for k in range(-6, 13)]      # N/8 ... 64N, 19 points
@@ -29,7 +29,19 @@ def _reference(scene):
     return _REF_CACHE[key]
 
 
-def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: int = 5) -> list[dict]:
+#: --quick runs (CI, first contact) take shorter timing samples than MIN_SAMPLE_SECONDS
+QUICK_MIN_SAMPLE = 0.005
+_QUICK = False
+
+
+def set_quick(quick: bool) -> None:
+    """Sweeps of a --quick run time shorter samples (their points are stored under their own keys)."""
+    global _QUICK
+    _QUICK = bool(quick)
+
+
+def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: int = 5,
+            min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
     """Build once; for each ray kind time the point and the scene's reference structure
     (:data:`REFERENCE`) side by side in ``repeats`` interleaved rounds (after a warm-up), and count
     work. Rows carry the point's own median (``seconds_raw``) and its median per-round ratio to the
@@ -44,7 +56,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
     for kind, r in rays_by_kind.items():
         tp = time_paired({"p": lambda: accel.intersect(r.origins, r.directions, counters=False),
                           "r": lambda: ref.intersect(r.origins, r.directions, counters=False)},
-                         rounds=repeats, repeats=1)
+                         rounds=repeats, repeats=1, min_sample=min_sample)
         p, q = np.asarray(tp["p"]), np.asarray(tp["r"])
         med = float(np.median(p))
         _, cnt = accel.intersect(r.origins, r.directions, counters=True)
@@ -92,7 +104,8 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
     for params in param_list:
         spec = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
                 "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
-                "timing": "beside-reference", **(extra_key or {})}
+                "timing": "beside-reference", **({"min_sample": QUICK_MIN_SAMPLE} if _QUICK else {}),
+                **(extra_key or {})}
         keys.append(spec)
         if store.get(spec) is None:
             specs.append(spec)

@@ -60,7 +60,8 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
 
-def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[], float] | None = None) -> dict:
+def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[], float] | None = None,
+                min_sample: float = MIN_SAMPLE_SECONDS) -> dict:
     """Time several callables in interleaved rounds (each round times every callable once with
     :func:`time_call`), so slow drifts of a shared machine hit all of them alike. Returns name ->
     list of per-round median seconds; compare callables by the median of per-round ratios
@@ -70,7 +71,7 @@ def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[]
         fn()  # warm-up (JIT compilation, caches) before the first round
     for _ in range(max(1, rounds)):
         for k, fn in fns.items():
-            out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock).median)
+            out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock, min_sample=min_sample).median)
     return out
 
 
