@@ -543,3 +543,15 @@ def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
 def test_unknown_layout_is_refused():
     with pytest.raises(GridcostError, match="layout"):
         UniformGrid(layout="soa")
+
+
+def test_cache_sizes_from_sysfs_or_environment(monkeypatch):
+    from tracer.memory import cache_bytes
+    monkeypatch.delenv("GRIDCOST_L2", raising=False)
+    l1, l2, l3 = cache_bytes(1), cache_bytes(2), cache_bytes(3)
+    assert 0 < l1 < l2 <= l3  # a real hierarchy (sysfs) or the defaults (1 MiB, 32 MiB)
+    monkeypatch.setenv("GRIDCOST_L2", "256K")
+    assert cache_bytes(2) == 256 << 10
+    monkeypatch.setenv("GRIDCOST_L2", "lots")
+    with pytest.raises(GridcostError, match="GRIDCOST_L2"):
+        cache_bytes(2)

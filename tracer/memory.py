@@ -37,10 +37,13 @@ def memory_budget() -> int:
 
 def cache_bytes(level: int = 2) -> int:
     """Size of cpu0's level-``level`` data/unified cache from sysfs ($GRIDCOST_L2 / $GRIDCOST_L3
-    override, e.g. '1M'); 1 MiB (L2) or 32 MiB (L3) when unknown."""
+    override, e.g. '1M'); 32 KiB (L1), 1 MiB (L2) or 32 MiB (L3) when unknown."""
     env = os.environ.get(f"GRIDCOST_L{level}")
     if env:
-        return _parse_bytes(env)
+        try:
+            return _parse_bytes(env)
+        except ValueError:
+            raise GridcostError(f"GRIDCOST_L{level}={env!r} is not a byte count (e.g. 1M)") from None
     base = "/sys/devices/system/cpu/cpu0/cache"
     try:
         for entry in sorted(os.listdir(base)):
@@ -53,7 +56,7 @@ def cache_bytes(level: int = 2) -> int:
                     return _parse_bytes(f.read())
     except (OSError, ValueError):
         pass
-    return 1 << 20 if level <= 2 else 32 << 20
+    return {1: 32 << 10, 2: 1 << 20}.get(level, 32 << 20)
 
 
 def fmt_bytes(n: float) -> str:
