@@ -204,7 +204,7 @@ def default_scenes(quick: bool) -> list[str]:
 def code_version() -> str:
     """Hash of the structures' sources: stored measurements are redone when the tracer changes."""
     h = hashlib.sha1()
-    for f in ("grid.py", "kdtree.py", "bvh.py", "geometry.py", "rays.py"):
+    for f in ("grid.py", "kdtree.py", "bvh.py", "geometry.py", "rays.py", "memory.py"):
         p = REPO / "tracer" / f
         h.update(p.read_bytes() if p.exists() else b"")
     return h.hexdigest()[:12]

@@ -1,6 +1,7 @@
 """Memory guard: estimate before allocating; refuse with the estimate when over the budget."""
 from __future__ import annotations
 
+import functools
 import os
 
 from tracer.constants import MEMORY_BUDGET_FRACTION
@@ -44,6 +45,12 @@ def cache_bytes(level: int = 2) -> int:
             return _parse_bytes(env)
         except ValueError:
             raise GridcostError(f"GRIDCOST_L{level}={env!r} is not a byte count (e.g. 1M)") from None
+    return _sysfs_cache_bytes(level)
+
+
+@functools.lru_cache(maxsize=None)
+def _sysfs_cache_bytes(level: int) -> int:
+    """sysfs lookup, once per process (every grid build asks)."""
     base = "/sys/devices/system/cpu/cpu0/cache"
     try:
         for entry in sorted(os.listdir(base)):
