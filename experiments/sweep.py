@@ -59,7 +59,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
                          rounds=repeats, repeats=1, min_sample=min_sample)
         p, q = np.asarray(tp["p"]), np.asarray(tp["r"])
         med = float(np.median(p))
-        _, cnt = accel.intersect(r.origins, r.directions, counters=True)
+        hits, cnt = accel.intersect(r.origins, r.directions, counters=True)
         mean = cnt.mean()
         rows.append({
             "scene": scene.name, "N": scene.n, "structure": structure,
@@ -71,7 +71,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
             "spread": float((p.max() - p.min()) / med), "ref_seconds": float(np.median(q)),
             "ratio_to_ref": float(np.median(p / q)), "clock": clock_name(), "ns_per_ray_raw": med / r.n * 1e9,
             **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},
-            "hits": float((accel.intersect(r.origins[:2000], r.directions[:2000], counters=False)[0].tri_id >= 0).mean()),
+            "hits": float((hits.tri_id[:2000] >= 0).mean()),
             "threads": numba.get_num_threads(), "worker": socket.gethostname(),
         })
     return rows
@@ -154,6 +154,11 @@ PAIRED_ROUNDS, PAIRED_REPEATS = 11, 5
 QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS = 3, 3
 
 
+def _paired_budget(quick: bool) -> tuple[int, int]:
+    """(rounds, repeats per round) of side-by-side timing."""
+    return (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
+
+
 def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict], rays, store: PointStore,
                      quick: bool = False, others: dict | None = None) -> dict:
     """Penalty of each of ``targets`` (name -> parameters, e.g. the theory's M) against the best of
@@ -167,7 +172,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
     from tracer.timing import paired_ratio
-    rounds, repeats = (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
+    rounds, repeats = _paired_budget(quick)
     points = []
     for p in list(targets.values()) + list(candidates):
         if p not in points:
@@ -207,9 +212,10 @@ def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=N
 def paired_plane(scene, structure: str, points: list[dict], rays, store: PointStore, quick: bool = False) -> np.ndarray:
     """% time over the best of every point of a parameter plane (e.g. Fig 5's (m1, m2) factors),
     all timed side by side in interleaved rounds: per round each point's time over that round's
-    fastest, then the median over rounds. Drift between rounds cancels, which a sweep's points,
-    measured minutes apart, do not have. Stored in ``store`` (resumable)."""
-    rounds, repeats = (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
+    fastest, then the median over rounds. Drift between rounds cancels, and the points are compared
+    directly rather than through the reference each sweep point is timed beside. Stored in ``store``
+    (resumable)."""
+    rounds, repeats = _paired_budget(quick)
     spec = {"paired_plane": 1, "scene": scene.name, "N": scene.n, "structure": structure, "points": points,
             "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats}
     done = store.get(spec)

@@ -27,6 +27,8 @@ MAILBOX = 32
 #: relative enlargement of cells in the overlap test, so rounding never drops a touching triangle
 CELL_EPS = 1e-5
 NCOUNT = len(COUNTER_NAMES)
+#: bytes of one row of ``tri_verts_`` (three float32 vertices)
+TRI_ROW_BYTES = 9 * 4
 
 
 # ---------------------------------------------------------------- resolution rules
@@ -61,7 +63,7 @@ def choose_layout(layout: str, n_tris: int, refs: int) -> str:
     if layout != "auto":
         return layout
     l2 = cache_bytes(2)
-    return "index" if n_tris * 36 <= l2 < refs * 36 else "copy"
+    return "index" if n_tris * TRI_ROW_BYTES <= l2 < refs * TRI_ROW_BYTES else "copy"
 
 
 def grid_params(bounds, res) -> np.ndarray:
