@@ -14,7 +14,6 @@ Havran statistics. ``experiments.hapala_table1.calibrate_scene`` measures them (
 """
 from __future__ import annotations
 
-import time
 from contextlib import contextmanager
 
 import numpy as np
@@ -132,8 +131,9 @@ def time_stats(runs) -> dict:
 
 @contextmanager
 def single_thread():
-    """Run the Numba kernels on the calling thread only: the times here are the calling thread's CPU
-    time (``time.thread_time``), which a shared machine does not inflate the way it does wall time."""
+    """Run the Numba kernels on the calling thread only: the times here are then the calling thread's
+    CPU time (:func:`tracer.timing.default_clock`, when its check trusts it), which a shared machine
+    does not inflate the way it does wall time."""
     import numba
     n = numba.get_num_threads()
     numba.set_num_threads(1)
@@ -149,13 +149,15 @@ def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
     then each of ``chunks`` parts of the rest is traced once (repeating the same few rays lets the
     caches and the branch predictor learn them: up to 2.5x too fast), minus the per-call overhead
     (the median time of a 1-ray call)."""
+    from tracer.timing import default_clock
+    clock = default_clock()
     o1, d1 = o[:1].copy(), d[:1].copy()
     accel.intersect(o1, d1, counters=False)
     ov = []
     for _ in range(15):
-        t0 = time.thread_time()
+        t0 = clock()
         accel.intersect(o1, d1, counters=False)
-        ov.append(time.thread_time() - t0)
+        ov.append(clock() - t0)
     overhead = float(np.median(ov))
     warm = min(int(warm), len(o) - 1)
     if warm > 0:
@@ -163,9 +165,9 @@ def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
     per = []
     for part in np.array_split(np.arange(warm, len(o)), max(1, chunks)):
         po, pd_ = np.ascontiguousarray(o[part]), np.ascontiguousarray(d[part])
-        t0 = time.thread_time()
+        t0 = clock()
         accel.intersect(po, pd_, counters=False)
-        dt = time.thread_time() - t0
+        dt = clock() - t0
         per.append(max(dt - overhead, 0.25 * dt) / max(len(part), 1))
     return time_stats(per)
 
@@ -538,10 +540,11 @@ class Selector:
         from tracer.rays import make_rays
         from tracer.scene import Scene
         build(Scene(scene.tris[:1], "warm-up"), "grid")  # load the compiled kernels outside the timing
+        from tracer.timing import build_clock
         with single_thread():
-            t0 = time.thread_time()
+            t0 = build_clock()  # builds on wall time (see tracer.timing.build_clock)
             grid = build(scene, "grid", factor=self.grid_factor)
-            t_build = time.thread_time() - t0
+            t_build = build_clock() - t0
         if rays is None:
             rays = make_rays(scene, self.kind, self.sample_rays, seed=self.seed)
         p = probe_grid(grid, rays, sample=min(self.sample_rays, rays.n), seed=self.seed)

@@ -2,20 +2,24 @@
 rays, beside Embree (embreex) and trimesh's ray_triangle, as ratios, in one run.
 
 Warm-up call first, median of ``--repeats`` (>= 5) runs; Numba threads pinned with ``--threads``.
-Embree through embreex traces on one thread (its ``run`` loops ``rtcIntersect1``), so Embree ratios
-are per thread; trimesh is timed on a small sample of rays.
+Embree through embreex traces on one thread (its ``run`` loops ``rtcIntersect1``). At one thread
+the Embree ratios compare one thread with one thread; with ``--threads T`` > 1 they are reported per
+thread (our Mrays/s / T against Embree's one-thread Mrays/s) and labelled so. trimesh is timed on a
+small sample of rays. Builds are timed with wall time. A structure that fails to build or trace
+fails the run (no "skipped"); Embree and trimesh are optional references and are reported as
+unavailable when their packages are missing.
 """
 from __future__ import annotations
 
+import sys
 import time
 
-import numpy as np
 
 from experiments.common import add_scene_args, emit_json, scene_from_args
 from experiments.results import write_json
 from tracer.accel import build
 from tracer.rays import make_rays
-from tracer.timing import host_info, set_threads, time_call
+from tracer.timing import build_clock, host_info, set_threads, time_call
 
 #: name -> (structure, params) of every variant benchmarked; grid cells = factor * N
 VARIANTS = {
@@ -43,7 +47,7 @@ def add_arguments(p) -> None:
 
 
 def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> dict:
-    t_build = time_call(accel_fn, repeats=3 if repeats > 1 else 1, warmup=0)
+    t_build = time_call(accel_fn, repeats=3 if repeats > 1 else 1, warmup=0, clock=build_clock)
     accel = accel_fn()
     row = {"build_s": t_build.median}
     for kind, r in rays_by_kind.items():
@@ -51,17 +55,10 @@ def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> dict:
         row[f"{kind}_mrays"] = r.n / tm.median / 1e6
         row[f"{kind}_spread"] = tm.spread
         if counters:
-            try:
-                _, cnt = accel.intersect(r.origins, r.directions, counters=True)
-                if cnt is not None:
-                    row[f"{kind}_per_ray"] = {k: round(v, 3) for k, v in cnt.mean().items()}
-            except NotImplementedError:
-                pass
-    try:
-        st = accel.stats()
-        row["stats"] = {k: v for k, v in st.items() if isinstance(v, (int, float, bool, str))}
-    except NotImplementedError:
-        pass
+            _, cnt = accel.intersect(r.origins, r.directions, counters=True)
+            row[f"{kind}_per_ray"] = {k: round(v, 3) for k, v in cnt.mean().items()}
+    st = accel.stats()
+    row["stats"] = {k: v for k, v in st.items() if isinstance(v, (int, float, bool, str))}
     return row
 
 
@@ -71,38 +68,33 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     rays = {"random": make_rays(scene, "random", n_rays, seed=seed),
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
-           "host": host_info(), "structures": {}, "skipped": {}}
+           "host": host_info(), "structures": {}, "unavailable": {}}
     for name in names:
         t0 = time.perf_counter()
-        try:
-            if name == "embree":
-                if not EmbreeAccel.available():
-                    out["skipped"][name] = "embreex not installed (pip install 'gridcost[embree]')"
-                    continue
-                row = _bench_one(lambda: EmbreeAccel().build(scene), rays, repeats, counters=False)
-                row["robust"] = False
-                row["threads"] = 1
-            elif name == "trimesh":
-                step = {k: max(1, r.n // trimesh_rays) for k, r in rays.items()}  # spread over the image
-                small = {k: r._replace(origins=r.origins[::step[k]][:trimesh_rays],
-                                       directions=r.directions[::step[k]][:trimesh_rays])
-                         for k, r in rays.items()}
-                try:
-                    row = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
-                except ImportError as exc:
-                    out["skipped"][name] = f"trimesh ray tracer unavailable ({exc})"
-                    continue
-                row["rays"] = trimesh_rays
-            else:
-                struct, params = VARIANTS[name]
-                row = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
-                row["params"] = params
-        except Exception as exc:  # a structure not built yet or failing must not hide the others
-            from tracer.errors import GridcostError
-            if isinstance(exc, (GridcostError, TypeError, KeyError)):
-                out["skipped"][name] = f"{type(exc).__name__}: {exc}"
+        if name == "embree":
+            if not EmbreeAccel.available():
+                out["unavailable"][name] = "embreex not installed (pip install 'gridcost[embree]')"
                 continue
-            raise
+            row = _bench_one(lambda: EmbreeAccel().build(scene), rays, repeats, counters=False)
+            row["robust"] = False
+            row["threads"] = 1
+        elif name == "trimesh":
+            step = {k: max(1, r.n // trimesh_rays) for k, r in rays.items()}  # spread over the image
+            small = {k: r._replace(origins=r.origins[::step[k]][:trimesh_rays],
+                                   directions=r.directions[::step[k]][:trimesh_rays])
+                     for k, r in rays.items()}
+            if not TrimeshAccel.available():
+                out["unavailable"][name] = "trimesh's ray tracer needs rtree (pip install rtree)"
+                continue
+            row = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
+            row["rays"] = trimesh_rays
+        elif name in VARIANTS:
+            struct, params = VARIANTS[name]
+            row = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
+            row["params"] = params
+        else:
+            from tracer.errors import GridcostError
+            raise GridcostError(f"bench: unknown structure {name!r}; known: {', '.join(VARIANTS)}, embree, trimesh")
         out["structures"][name] = row
         log(f"  {name:13s} build {row['build_s'] * 1e3:9.1f} ms   random {row.get('random_mrays', 0):7.3f} "
             f"Mrays/s   camera {row.get('camera_mrays', 0):7.3f} Mrays/s   ({time.perf_counter() - t0:.0f} s)")
@@ -110,10 +102,13 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     ratios = {}
     if "embree" in s:
         e = s["embree"]
+        # Embree traces on one thread: at T > 1 threads compare per thread (ours / T), and say so
+        label = "/embree" if threads == 1 else f"/embree per thread (ours / {threads} threads vs embree 1 thread)"
+        out["embree_ratio_basis"] = "1 thread vs 1 thread" if threads == 1 else f"per thread: ours / {threads}"
         for name, row in s.items():
             if name not in ("embree", "trimesh"):
-                ratios[f"{name}/embree"] = {k: row[f"{k}_mrays"] / e[f"{k}_mrays"] for k in rays}
-                ratios[f"{name}/embree"]["build"] = row["build_s"] / e["build_s"]
+                ratios[f"{name}{label}"] = {k: row[f"{k}_mrays"] / threads / e[f"{k}_mrays"] for k in rays}
+                ratios[f"{name}{label}"]["build"] = row["build_s"] / e["build_s"]
     if "trimesh" in s and "grid" in s:
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
@@ -169,6 +164,6 @@ def main(args) -> int:
     else:
         for k, v in out["ratios"].items():
             print(f"  {k:22s} " + "  ".join(f"{kk} {vv:7.3f}x" for kk, vv in v.items()))
-        for k, v in out["skipped"].items():
-            print(f"  skipped {k}: {v}")
+        for k, v in out["unavailable"].items():
+            print(f"  unavailable {k}: {v}", file=sys.stderr)
     return 0

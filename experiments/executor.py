@@ -18,7 +18,9 @@ def remember_scene(scene) -> None:
 
 
 def run_point(spec: dict) -> tuple[dict, list[dict]]:
-    """Measure one sweep point from its spec (runs on a worker or locally). Returns (spec, rows)."""
+    """Measure one sweep point from its spec (runs on a worker or locally). Returns (spec, rows);
+    every row carries the worker's measurement key (``key``: code digest, threads, clock, CPU,
+    versions) so the client can refuse a point made by other code."""
     from experiments.sweep import measure
     from tracer.timing import MIN_SAMPLE_SECONDS
     from tracer.rays import make_rays
@@ -29,8 +31,11 @@ def run_point(spec: dict) -> tuple[dict, list[dict]]:
     if spec.get("threads"):
         from tracer.timing import set_threads
         set_threads(spec["threads"])
-    return spec, measure(scene, spec["structure"], spec["params"], rays, spec["repeats"],
-                         spec.get("min_sample", MIN_SAMPLE_SECONDS))
+    from tracer.provenance import measurement_key
+    rows = measure(scene, spec["structure"], spec["params"], rays, spec["repeats"],
+                   spec.get("min_sample", MIN_SAMPLE_SECONDS))
+    key = measurement_key(tuple(spec.get("code", ())))
+    return spec, [dict(r, key=key) for r in rows]
 
 
 class LocalExecutor:

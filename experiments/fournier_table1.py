@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, log_scale, write_csv, write_meta
 
 TARGET = "fournier-table1"
 
@@ -355,8 +355,8 @@ def _figure(df):
                                 label="paper Table 1, flat lists (same size factor)")
         for i in range(2):
             ax = axes[i][j]
-            ax.set_xscale("log")
-            ax.set_yscale("log")
+            log_scale(ax, "x", d.N)
+            log_scale(ax, "y", [v for ln in ax.get_lines() for v in ln.get_ydata()])
             ax.xaxis.set_minor_formatter(NullFormatter())
             ax.yaxis.set_minor_formatter(NullFormatter())
             ax.tick_params(labelsize=7)

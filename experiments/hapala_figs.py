@@ -14,7 +14,7 @@ import pandas as pd
 
 from costmodel.select import (ERR_CAP, R_VALUES, SAMPLE_SIZES, GridcostEstimator, HapalaEstimator, evaluate,
                               exact_rc, loo_errors, records)
-from experiments.results import atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, log_scale, write_csv, write_meta
 
 KIND = {"fig1h": "random", "fig2h": "path"}
 ESTIMATORS = {"paper": HapalaEstimator, "ours": GridcostEstimator}
@@ -350,8 +350,8 @@ def figure(target, kind, ev, sa, floor=None) -> None:
         d = sa[(sa.estimator == name) & (sa.axis == "sample rays")]
         ax.plot(d.cost_s, d.mean_abs_err, sty[name], marker="o", ms=3, color="tab:green",
                 label=f"vs decision sample (100 … 3000 rays), {lab[name]}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    log_scale(ax, "x", sa.cost_s)
+    log_scale(ax, "y", sa.mean_abs_err)
     ax.set(xlabel="cost (s): calibration phase, or the decision's ray sample", ylabel="mean |Err| (%)",
            title="speed against accuracy")
     ax.legend(fontsize=6)

@@ -10,7 +10,6 @@ into one grid cell), while random rays, defined on the whole scene's bounding sp
 only the stadium walls, where the grid stays faster."""
 from __future__ import annotations
 
-import hashlib
 import time
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import pandas as pd
 
 from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
                               time_stats)
-from experiments.results import PointStore, REPO, atomic_write, finish_figure, write_csv, write_json, write_meta
+from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_json, write_meta
 from tracer.timing import set_threads
 
 KINDS = ("random", "path")
@@ -68,33 +67,39 @@ QUICK = ["cornell", "boxes-44", "bunny-948", "suzanne", "cylinder-196", "particl
 
 # ---------------------------------------------------------------- calibration phase (Hapala Sec 3, steps 1-4)
 def cpu_call(fn, repeats: int = 5, warmup: int = 1, min_sample: float = 0.02) -> list[float]:
-    """Thread CPU seconds per call of ``fn``, one value per repeat (single-threaded runs: CPU time,
-    unlike wall time, is not inflated while other processes hold the shared cores); a sample repeats
-    the call until it lasts ``min_sample`` seconds (like :func:`tracer.timing.time_call`)."""
+    """Seconds per call of ``fn`` on :func:`tracer.timing.default_clock` (single-threaded runs: the
+    thread's CPU time when the clock check trusts it, unlike wall time not inflated while other
+    processes hold the shared cores), one value per repeat; a sample repeats the call until it lasts
+    ``min_sample`` seconds (like :func:`tracer.timing.time_call`)."""
+    from tracer.timing import default_clock
+    clock = default_clock()
     for _ in range(warmup):
         fn()
-    t0 = time.thread_time()
+    t0 = clock()
     fn()
-    once = time.thread_time() - t0
+    once = clock() - t0
     number = max(1, int(np.ceil(min_sample / max(once, 1e-9)))) if once < min_sample else 1
     runs = []
     for _ in range(max(1, repeats)):
-        t0 = time.thread_time()
+        t0 = clock()
         for _ in range(number):
             fn()
-        runs.append((time.thread_time() - t0) / number)
+        runs.append((clock() - t0) / number)
     return runs
 
 
 def _timed_build(scene, structure, params, repeats):
-    """(structure, CPU build seconds {median, min} of ``repeats`` builds after a warm-up, wall build_s)."""
+    """(structure, build seconds {median, min} of ``repeats`` builds after a warm-up, the structure's
+    own build_s). Builds are timed with wall time (:data:`tracer.timing.build_clock`): a library may
+    build on threads the calling thread's CPU time does not see."""
     from tracer.accel import build
+    from tracer.timing import build_clock
     acc = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
     cpu, wall = [], []
     for _ in range(max(repeats, 1)):
-        t0 = time.thread_time()
+        t0 = build_clock()
         a = build(scene, structure, **params)
-        cpu.append(time.thread_time() - t0)
+        cpu.append(build_clock() - t0)
         wall.append(a.stats()["build_s"])
     return acc, time_stats(cpu), float(np.median(wall))
 
@@ -176,20 +181,11 @@ def add_arguments(p) -> None:
                    help="measure every scene a second time: test-retest repeatability of the times and R_C")
 
 
-def spd_available() -> bool:
-    try:
-        from tracer import spd  # noqa: F401
-        return hasattr(spd, "spd_scene")
-    except Exception:  # an SPD module being written may not import yet
-        return False
-
-
 def load_any(name: str):
     """A named scene: SPD (``sphereflake-2``), procedural or MANIFEST; or a mesh path."""
-    if spd_available():
-        from tracer import spd
-        if spd.matches(name):
-            return spd.spd_scene(name)
+    from tracer import spd
+    if spd.matches(name):
+        return spd.spd_scene(name)
     from tracer.scene import load_scene
     return load_scene(name)
 
@@ -198,16 +194,7 @@ def default_scenes(quick: bool) -> list[str]:
     if quick:
         return list(QUICK)
     from tracer.scene import manifest
-    return sorted(manifest()) + PROCEDURAL + (SPD if spd_available() else [])
-
-
-def code_version() -> str:
-    """Hash of the structures' sources: stored measurements are redone when the tracer changes."""
-    h = hashlib.sha1()
-    for f in ("grid.py", "kdtree.py", "bvh.py", "geometry.py", "rays.py", "memory.py"):
-        p = REPO / "tracer" / f
-        h.update(p.read_bytes() if p.exists() else b"")
-    return h.hexdigest()[:12]
+    return sorted(manifest()) + PROCEDURAL + SPD
 
 
 def settings(args) -> dict:
@@ -220,14 +207,19 @@ def settings(args) -> dict:
             "hiers": ["kdtree", "bvh"]}
 
 
-def measure_all(names, cfg: dict, out, force: bool = False, log=print, repeat_pass: int = 1) -> list[dict]:
-    """Calibrate every scene (resumable: one stored point per scene and settings); ``repeat_pass`` > 1
-    measures the same again as an independent retest."""
-    store = PointStore(out, force=force)
-    code = code_version()
+#: the code (beside tracer/) that shapes a stored calibration point
+MEASURE_CODE = ("experiments/hapala_table1.py", "costmodel/select.py")
+
+
+def measure_all(names, cfg: dict, out, force: bool = False, log=print, repeat_pass: int = 1,
+                reuse_stale: bool = False) -> list[dict]:
+    """Calibrate every scene (resumable: one stored point per scene and settings, keyed by the
+    measurement key of :class:`experiments.results.PointStore`); ``repeat_pass`` > 1 measures the
+    same again as an independent retest."""
+    store = PointStore(out, force=force, code=MEASURE_CODE, reuse_stale=reuse_stale)
     raw = []
     for i, name in enumerate(names):
-        key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "code": code, "protocol": PROTOCOL, **cfg}
+        key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "protocol": PROTOCOL, **cfg}
         if repeat_pass > 1:
             key["pass"] = repeat_pass
 
@@ -238,7 +230,7 @@ def measure_all(names, cfg: dict, out, force: bool = False, log=print, repeat_pa
         t0 = time.perf_counter()
         row, cached = store.measure(key, fn)
         log(f"[{i + 1}/{len(names)}] {name}: N={row['N']:,} {'(stored)' if cached else f'{time.perf_counter() - t0:.1f} s'}")
-        raw.append(row)
+        raw.append(dict(row, provenance=store.provenance(key)))
     return raw
 
 
@@ -250,7 +242,7 @@ def table(raw: list[dict], hier: str = "kdtree") -> pd.DataFrame:
     for r in raw:
         first = recs[recs.scene == r["scene"]].iloc[0]
         e = {"scene": r["scene"], "N": r["N"], "sigma": r["sigma"], "T_BG_ms": first.T_BG * 1e3,
-             "T_BH_ms": first.T_BH * 1e3}
+             "T_BH_ms": first.T_BH * 1e3, **(r.get("provenance") or {})}
         for kind in KINDS:
             k = recs[(recs.scene == r["scene"]) & (recs.kind == kind)].iloc[0]
             e.update({f"t_RG_us_{kind}": k.t_RG * 1e6, f"t_RH_us_{kind}": k.t_RH * 1e6, f"R_C_{kind}": k.R_C,
@@ -418,7 +410,7 @@ def run(args, log=print) -> dict:
     threads = set_threads(args.threads or 1)
     cfg = settings(args)
     names = args.scenes.split(",") if args.scenes else default_scenes(args.quick)
-    raw = measure_all(names, cfg, args.out, force=args.force, log=log)
+    raw = measure_all(names, cfg, args.out, force=args.force, log=log, reuse_stale=args.reuse_stale)
     out_dir = Path(args.out) / "table1h"
     write_json(out_dir / "raw.json", raw)
     cal = pd.concat([records(raw, hier=h) for h in cfg["hiers"]], ignore_index=True)
@@ -431,15 +423,15 @@ def run(args, log=print) -> dict:
             f"{nb['random']} (random) / {nb['path']} (path) of {len(bvh)} scenes (calibration.csv, hier = bvh).")
     md = summary(tab, cfg, threads, note, notes=[stadium_note(raw, tab)])
     if getattr(args, "retest", False):
-        raw2 = measure_all(names, cfg, args.out, force=args.force, log=log, repeat_pass=2)
+        raw2 = measure_all(names, cfg, args.out, force=args.force, log=log, repeat_pass=2,
+                           reuse_stale=args.reuse_stale)
         write_json(out_dir / "raw_retest.json", raw2)
         rt = retest(raw, raw2)
         write_csv(out_dir / "retest.csv", rt)
         md += retest_summary(rt)
     atomic_write(out_dir / "summary.md", md)
     figure(tab)
-    write_meta(out_dir, "table1h", started, threads=threads, scenes=names, quick=bool(args.quick), **cfg,
-               code_version=code_version())
+    write_meta(out_dir, "table1h", started, threads=threads, scenes=names, quick=bool(args.quick), **cfg)
     log(md)
     return {"table": tab, "raw": raw}
 

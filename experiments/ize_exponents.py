@@ -97,7 +97,7 @@ def best_m(scene, kind, n_rays, repeats, store, quick, seed) -> tuple[float, pd.
 def main(args) -> int:
     started = time.time()
     threads = set_threads(args.threads or 1)
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args)
     wanted = [f.strip() for f in args.families.split(",")] if args.families else None
     fams = {k: v for k, v in FAMILIES.items() if not wanted or any(k.startswith(w) for w in wanted)}
     if args.quick and not wanted:

@@ -52,7 +52,7 @@ def main(args) -> int:
     c1s, c2s = (C1[1::2], C2[::2]) if args.quick else (C1, C2)
     n_rays = args.rays or (5_000 if args.quick else 50_000)
     repeats = args.repeats or (3 if args.quick else 5)
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args)
     frames, lines = [], ["# Figure 5 (Ize 2007): two-level grid resolution plane, % time over the best", "",
                          f"Random rays ({n_rays:,}), {threads} thread(s). Every point of a plane is timed side by side "
                          f"in interleaved rounds ({'quick' if args.quick else f'{PAIRED_ROUNDS} rounds of {PAIRED_REPEATS} samples'}; "

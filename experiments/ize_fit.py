@@ -40,7 +40,7 @@ def main(args) -> int:
     repeats = args.repeats or (3 if args.quick else 5)
     factors = QUICK_FACTORS if args.quick else FULL_FACTORS
     rays = {"random": make_rays(scene, "random", n_rays, seed=args.seed)}
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args)
     rows = sweep(scene, "grid", grid_cells(scene, factors), rays, store, repeats, desc=f"fit {scene.name}")
     df = pd.DataFrame(rows)
     sel = select_model(df.cells.values, df.ns_per_ray.values, scene.n)

@@ -52,7 +52,7 @@ def run(args, log=print) -> dict:
     repeats = args.repeats or (5 if not quick else 3)
     factors = QUICK_FACTORS if quick else FULL_FACTORS
     out_dir = Path(args.out) / "table2"
-    store = PointStore(args.out, force=args.force)  # one point store shared by all targets
+    store = PointStore.for_args(args)  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
 
     rows, scenes, rays = [], {}, {}

@@ -51,7 +51,7 @@ def run(args, log=print) -> dict:
     n_rays = args.rays or (5_000 if quick else 50_000)
     repeats = args.repeats or (3 if quick else 5)
     out_dir = Path(args.out) / "table3"
-    store = PointStore(args.out, force=args.force)  # one point store shared by all targets
+    store = PointStore.for_args(args, code=("experiments/memprobe.py",))  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
     rows, scenes, rays = [], {}, {}
     for name in names:

@@ -53,7 +53,7 @@ def run(args, log=print) -> dict:
     names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER2])
     n_rays = args.rays or (10_000 if quick else 100_000)
     repeats = args.repeats or (3 if quick else 5)
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args)
     out_dir = Path(args.out) / "table4"
     rows, one_rows, table = [], [], []
     for name in names:

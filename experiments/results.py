@@ -41,6 +41,14 @@ def write_json(path, obj) -> Path:
 
 
 def write_csv(path, df: pd.DataFrame) -> Path:
+    """Write ``df`` atomically; rows without provenance columns (``commit``, ``host``, ``clock``) get
+    the values behind this target's numbers (:data:`LEDGER`)."""
+    missing = [c for c in PROVENANCE_COLUMNS if c not in df.columns]
+    if missing:
+        df = df.copy()
+        vals = LEDGER.column_values()
+        for c in missing:
+            df[c] = vals[c]
     return atomic_write(path, df.to_csv(index=False))
 
 
@@ -76,6 +84,20 @@ def save_figure(fig, name: str, out_dir=None) -> list[Path]:
     return paths
 
 
+def log_scale(ax, axis: str, values) -> bool:
+    """Put ``axis`` ("x" or "y") of ``ax`` on a log scale when ``values`` hold a positive finite
+    number; otherwise leave it linear and say on the panel that there is nothing to draw on a log
+    scale (a --quick run can produce such data; matplotlib would raise). Returns True when log."""
+    import numpy as np
+    v = np.asarray(values, dtype=float).ravel()
+    if (np.isfinite(v) & (v > 0)).any():
+        (ax.set_xscale if axis == "x" else ax.set_yscale)("log")
+        return True
+    ax.text(0.5, 0.5, "no positive values to draw on a log scale", transform=ax.transAxes, ha="center",
+            va="center", fontsize=8, color="gray")
+    return False
+
+
 def finish_figure(fig, name: str) -> list[Path]:
     """Lay out ``fig``, save it (:func:`save_figure`) and close it."""
     import matplotlib.pyplot as plt
@@ -86,6 +108,7 @@ def finish_figure(fig, name: str) -> list[Path]:
 
 
 def git_commit() -> str:
+    """Short commit of the working tree, with ``-dirty`` when tracked files differ from it."""
     try:
         out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
                              text=True, timeout=10)
@@ -98,7 +121,7 @@ def git_commit() -> str:
 
 def versions() -> dict:
     out = {}
-    for pkg in ("numpy", "numba", "scipy", "sympy", "pandas", "trimesh", "matplotlib", "embreex"):
+    for pkg in ("numpy", "numba", "llvmlite", "scipy", "sympy", "pandas", "trimesh", "matplotlib", "embreex"):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -106,43 +129,171 @@ def versions() -> dict:
     return out
 
 
+# ---------------------------------------------------------------- provenance of the numbers a target writes
+#: the provenance columns every CSV row carries
+PROVENANCE_COLUMNS = ("commit", "host", "clock")
+
+
+class Ledger:
+    """Who measured the numbers a target writes: the provenance of every stored point it served or
+    stored, and whether it timed anything itself in this run. :func:`start_target` resets it;
+    :func:`write_csv` and :func:`write_meta` read it."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self) -> None:
+        self.served: dict[tuple, int] = {}
+        self.stale = 0
+        self.reused = 0
+        self.measured = 0
+        self._timing_calls0 = _timing_calls()
+        self._now: dict | None = None
+
+    def now(self) -> dict:
+        """Provenance of a measurement made now (commit read once per target run)."""
+        if self._now is None:
+            from tracer.provenance import host
+            from tracer.timing import clock_name
+            self._now = {"commit": git_commit(), "host": host(), "clock": clock_name()}
+        return dict(self._now)
+
+    def add(self, prov: dict, stale: bool = False) -> None:
+        k = tuple(prov.get(c) for c in PROVENANCE_COLUMNS)
+        self.served[k] = self.served.get(k, 0) + 1
+        self.stale += bool(stale)
+
+    def timed_now(self) -> bool:
+        return _timing_calls() > self._timing_calls0
+
+    def sources(self) -> list[dict]:
+        """Distinct (commit, host, clock) behind this target's numbers, with point counts."""
+        out = [dict(zip(PROVENANCE_COLUMNS, k), points=n) for k, n in self.served.items()]
+        if self.timed_now():
+            now = self.now()
+            if not any(all(o[c] == now[c] for c in PROVENANCE_COLUMNS) for o in out):
+                out.append(dict(now, points=0))
+        return out
+
+    def column_values(self) -> dict:
+        """The value of each provenance column for a row that does not carry its own: the distinct
+        values behind the file joined by ';' (one value when one commit measured everything)."""
+        src = self.sources()
+        if not src:
+            return {c: "derived (see the input files' meta.json)" for c in PROVENANCE_COLUMNS}
+        return {c: ";".join(sorted({str(o[c]) for o in src})) for c in PROVENANCE_COLUMNS}
+
+
+def _timing_calls() -> int:
+    from tracer.timing import timing_calls
+    return timing_calls()
+
+
+LEDGER = Ledger()
+
+
+def start_target() -> None:
+    """Called by the CLI before each target: a fresh :data:`LEDGER`."""
+    LEDGER.reset()
+
+
 def write_meta(out_dir, target: str, started: float, **extra) -> Path:
     from tracer.timing import host_info
+    src = LEDGER.sources()
     meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
             "wall_seconds": round(time.time() - started, 2),
-            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), **extra}
+            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "measured_by": {"commits": sorted({str(o["commit"]) for o in src}),
+                            "hosts": sorted({str(o["host"]) for o in src}),
+                            "clocks": sorted({str(o["clock"]) for o in src}), "sources": src,
+                            "points_measured_now": LEDGER.measured, "points_reused": LEDGER.reused,
+                            "stale_points_reused": LEDGER.stale},
+            **extra}
     return write_json(Path(out_dir) / "meta.json", meta)
 
 
 class PointStore:
-    """One JSON file per measured point, keyed by the point's parameters."""
+    """One JSON file per measured point, named by the point's parameters and holding the
+    measurement key (:func:`tracer.provenance.measurement_key`: code digest, threads, clock, CPU,
+    library versions) and the provenance (commit, host, clock, time) of the measurement.
 
-    def __init__(self, directory, force: bool = False):
+    A stored point whose key differs from the current one (other code, threads, clock, CPU) is
+    measured again; with ``reuse_stale`` it is used and its rows are marked ``stale``. ``code`` names
+    the experiment/cost-model files (repository-relative) that shape the point, beside ``tracer/``
+    which is always in the key."""
+
+    DEFAULT_CODE = ("experiments/sweep.py", "experiments/executor.py")
+
+    def __init__(self, directory, force: bool = False, code: tuple = (), reuse_stale: bool = False):
         self.dir = Path(directory) / "points"
         self.force = force
+        self.reuse_stale = reuse_stale
+        self.code = tuple(sorted(set(self.DEFAULT_CODE) | set(code)))
         self._fresh: set[str] = set()  # points measured by this run (visible even with --force)
+
+    @classmethod
+    def for_args(cls, args, code: tuple = (), out=None) -> "PointStore":
+        return cls(out or args.out, force=getattr(args, "force", False), code=code,
+                   reuse_stale=getattr(args, "reuse_stale", False))
+
+    @property
+    def measurement_key(self) -> dict:
+        from tracer.provenance import measurement_key
+        return measurement_key(self.code)
 
     @staticmethod
     def key(params: dict) -> str:
         return hashlib.sha1(json.dumps(params, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
-    def get(self, params: dict, ignore_force: bool = False):
-        key = self.key(params)
-        if self.force and not ignore_force and key not in self._fresh:
+    def _read(self, params: dict):
+        p = self.dir / f"{self.key(params)}.json"
+        if not p.exists():
             return None
-        p = self.dir / f"{key}.json"
-        if p.exists():
-            try:
-                return json.loads(p.read_text())
-            except (OSError, ValueError):
-                return None
-        return None
+        try:
+            rec = json.loads(p.read_text())
+        except (OSError, ValueError):
+            return None  # a corrupt point is measured again
+        return rec if isinstance(rec, dict) and "value" in rec else {"value": rec, "key": None, "provenance": {}}
 
-    def put(self, params: dict, row: dict) -> dict:
-        key = self.key(params)
-        write_json(self.dir / f"{key}.json", row)
-        self._fresh.add(key)
-        return row
+    def record(self, params: dict, ignore_force: bool = False):
+        """The stored record ``{value, key, provenance, stale}`` for ``params``, or None when it
+        must be measured (missing, ``--force``, or stale without ``reuse_stale``)."""
+        k = self.key(params)
+        if self.force and not ignore_force and k not in self._fresh:
+            return None
+        rec = self._read(params)
+        if rec is None:
+            return None
+        stale = rec.get("key") != self.measurement_key
+        if stale and not self.reuse_stale and k not in self._fresh:
+            return None
+        rec["stale"] = bool(stale)
+        return rec
+
+    def get(self, params: dict, ignore_force: bool = False):
+        rec = self.record(params, ignore_force)
+        if rec is None:
+            return None
+        if self.key(params) not in self._fresh:  # a point stored in this run is in the ledger already
+            LEDGER.reused += 1
+            LEDGER.add(rec.get("provenance") or {}, stale=rec["stale"])
+        return rec["value"]
+
+    def provenance(self, params: dict) -> dict:
+        """Provenance columns of a stored point (``stale`` added): ``commit``, ``host``, ``clock``."""
+        rec = self.record(params, ignore_force=True) or {}
+        prov = rec.get("provenance") or {}
+        return {**{c: prov.get(c) for c in PROVENANCE_COLUMNS}, "stale": bool(rec.get("stale"))}
+
+    def put(self, params: dict, value, provenance: dict | None = None) -> dict:
+        """Store ``value`` measured now (or by ``provenance``, e.g. a Dask worker's host)."""
+        k = self.key(params)
+        prov = {**LEDGER.now(), **(provenance or {}), "measured": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        write_json(self.dir / f"{k}.json", {"key": self.measurement_key, "provenance": prov, "value": value})
+        self._fresh.add(k)
+        LEDGER.measured += 1
+        LEDGER.add(prov)
+        return value
 
     def measure(self, params: dict, fn) -> tuple[dict, bool]:
         """Stored row for ``params``, or ``fn()`` measured now and stored. Returns (row, was_cached)."""

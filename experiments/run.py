@@ -3,7 +3,10 @@
 One table of targets (``TARGETS``) maps a name to the module that implements it.
 Every target module exposes ``add_arguments(parser)`` and ``main(args) -> int``.
 Bad input anywhere raises :class:`tracer.errors.GridcostError`; it is printed as one
-line on stderr and the process exits with status 2.
+line on stderr and the process exits with status 2. Any other exception is an internal
+error: one line naming the target, exit status 1 (``--debug`` shows the traceback).
+``all`` goes on after a failed target (targets are resumable), lists what failed and
+exits non-zero.
 """
 from __future__ import annotations
 
@@ -51,24 +54,24 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="results", help="results directory (default: results)")
     p.add_argument("--quick", action="store_true", help="fewer rays and sweep points (CI, first contact)")
     p.add_argument("--force", action="store_true", help="redo sweep points already stored")
+    p.add_argument("--reuse-stale", action="store_true",
+                   help="use stored points measured under another measurement key (other code, threads, clock "
+                        "or CPU); their rows are marked stale")
+    p.add_argument("--allow-dirty", action="store_true",
+                   help="let `all` write into the default results/ from a tree with uncommitted changes (recorded)")
+    p.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     p.add_argument("--dask", default=None, metavar="ADDRESS",
                    help="send sweep points to a Dask scheduler (tcp://host:8786, or 'local' for a LocalCluster)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m experiments.run", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="gridcost", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="target", required=True, metavar="target")
     for name, (modname, helptext) in list(TARGETS.items()) + [("all", ("", "every target in dependency order"))]:
         p = sub.add_parser(name, help=helptext, description=helptext)
         _common(p)
         if modname:
-            try:
-                mod = importlib.import_module(modname)
-            except ModuleNotFoundError as exc:  # a target whose module is not written yet
-                if exc.name != modname:
-                    raise
-                continue
-            mod.add_arguments(p)
+            importlib.import_module(modname).add_arguments(p)
     return parser
 
 
@@ -80,51 +83,89 @@ def _index(out) -> None:
         write_index(out)
 
 
-def main(argv: list[str] | None = None) -> int:
-    from tracer.errors import GridcostError
+def _refuse_dirty(args) -> None:
+    """``all`` into the default results/ must come from a clean commit (or say it did not)."""
+    from pathlib import Path
 
+    from experiments.results import REPO, git_commit
+    from tracer.errors import GridcostError
+    if Path(args.out).resolve() != (REPO / "results").resolve():
+        return
+    commit = git_commit()
+    if commit.endswith("-dirty") and not args.allow_dirty:
+        raise GridcostError(f"the tree has uncommitted changes ({commit}): commit them before `all` writes the "
+                            f"committed results/, or pass --allow-dirty (recorded in every meta.json)")
+
+
+def _run_target(name: str, args) -> int:
+    from experiments.results import start_target
+    start_target()
+    rc = importlib.import_module(TARGETS[name][0]).main(args)
+    if name != "verify":
+        _index(args.out)
+    return rc
+
+
+def _sub_args(name: str, args) -> argparse.Namespace:
+    flags = [f for f in ("quick", "force", "reuse_stale", "allow_dirty", "debug") if getattr(args, f, False)]
+    return build_parser().parse_args([name, "--out", args.out] + [f"--{f.replace('_', '-')}" for f in flags]
+                                     + (["--threads", str(args.threads)] if args.threads else []))
+
+
+def _failure(name: str, exc: BaseException, debug: bool) -> int:
+    """One line on stderr for a failed target; 2 for bad input, 1 for an internal error."""
+    from tracer.errors import GridcostError
+    if debug:
+        import traceback
+        traceback.print_exception(exc)
+    if isinstance(exc, GridcostError):
+        print(f"error: {name}: {exc}", file=sys.stderr)
+        return 2
+    first = str(exc).splitlines()[0] if str(exc) else ""
+    print(f"internal error in {name}: {type(exc).__name__}: {first} (--debug shows the traceback)", file=sys.stderr)
+    return 1
+
+
+def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.models:
         os.environ["GRIDCOST_MODELS"] = args.models
-    if args.threads:
-        import numba
-        numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-    from experiments.results import set_output
-    from experiments.sweep import set_quick
-    set_output(args.out)
-    set_quick(getattr(args, "quick", False))
     try:
+        if args.threads:
+            from tracer.timing import set_threads
+            set_threads(args.threads)
+        from experiments.results import set_output
+        from experiments.sweep import set_quick
+        set_output(args.out)
+        set_quick(getattr(args, "quick", False))
         if args.dask:
             from experiments.executor import set_executor
             set_executor(args.dask)
-        if args.target == "all":
-            rc = 0
-            for name in ALL_ORDER:
-                try:
-                    mod = importlib.import_module(TARGETS[name][0])
-                except ModuleNotFoundError:
-                    print(f"skipping {name}: not available in this build", file=sys.stderr)
-                    continue
-                sub_args = build_parser().parse_args([name] + (["--quick"] if args.quick else [])
-                                                     + (["--force"] if args.force else [])
-                                                     + ["--out", args.out])
-                rc = max(rc, mod.main(sub_args))
-            _index(args.out)
-            return rc
+        if args.target != "all":
+            return _run_target(args.target, args)
+        _refuse_dirty(args)
+    except Exception as exc:
+        return _failure(args.target, exc, args.debug)
+    failed = {}
+    for name in ALL_ORDER:
         try:
-            mod = importlib.import_module(TARGETS[args.target][0])
-        except ModuleNotFoundError as exc:
-            if exc.name != TARGETS[args.target][0]:
-                raise
-            raise GridcostError(f"target {args.target!r} is not available in this build") from None
-        rc = mod.main(args)
-        if args.target not in ("verify",):
-            _index(args.out)
-        return rc
-    except GridcostError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+            rc = _run_target(name, _sub_args(name, args))
+            if rc:
+                failed[name] = rc
+        except Exception as exc:
+            failed[name] = _failure(name, exc, args.debug)
+    _index(args.out)
+    if failed:
+        print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
+              + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
+        return max(failed.values())
+    return 0
+
+
+def cli() -> None:
+    """The ``gridcost`` console command (same as ``python -m experiments.run``)."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli()

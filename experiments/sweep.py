@@ -108,17 +108,28 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
                 **(extra_key or {})}
         keys.append(spec)
         if store.get(spec) is None:
-            specs.append(spec)
+            specs.append(dict(spec, code=list(store.code), threads=store.measurement_key["threads"]))
     if specs:
         bar = tqdm(total=len(specs), desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
                    disable=None, dynamic_ncols=True)
+        mine = store.measurement_key
         for spec, rows in get_executor().map(specs):
-            store.put(spec, {"rows": rows})
+            theirs = rows[0].pop("key") if rows else mine
+            for r in rows[1:]:
+                r.pop("key", None)
+            if theirs != mine:
+                from tracer.errors import GridcostError
+                raise GridcostError(f"worker {rows[0]['worker']} measured with another measurement key "
+                                    f"({theirs}) than this run ({mine}): same code, threads, clock and CPU needed")
+            spec = {k: v for k, v in spec.items() if k not in ("code", "threads")}
+            store.put(spec, {"rows": rows}, provenance={"host": rows[0]["worker"], "clock": rows[0]["clock"]}
+                      if rows else None)
             bar.update(1)
         bar.close()
     out = []
     for spec in keys:
-        out.extend(dict(r) for r in store.get(spec, ignore_force=True)["rows"])
+        prov = store.provenance(spec)
+        out.extend(dict(r, **prov) for r in store.get(spec, ignore_force=True)["rows"])
     anchor = _anchor(store, scene, rays_by_kind, out)
     for r in out:  # drift-free time: ratio to the reference x the reference's anchored time
         r["seconds"] = r["ratio_to_ref"] * anchor[r["worker"]][r["ray_kind"]]

@@ -84,7 +84,7 @@ def measure_points(store: PointStore, target: str, scene, param_list, side, repe
     first), so a burst of load on a shared machine hits every point alike; per point the median
     of the rounds. Camera rays in k x k tile order; the counted work of the same rays."""
     keys = [{"target": target, "scene": scene.name, "params": p, "side": side, "repeats": repeats,
-             "threads": threads, "kernel": 5} for p in param_list]
+             "threads": threads} for p in param_list]
     todo = [(k, p) for k, p in zip(keys, param_list) if store.get(k) is None]
     if todo:
         built = [(CoherentGrid(**p).build(scene), camera(scene, side, p.get("packet", 8))) for _, p in todo]
@@ -96,7 +96,7 @@ def measure_points(store: PointStore, target: str, scene, param_list, side, repe
         for (key, params), (cgt, rays), sec in zip(todo, built, samples):
             row = store.put(key, _row(scene, params, cgt, rays, sec, (max(sec) - min(sec)) / float(np.median(sec))))
             log(f"  {scene.name} {params}: {row['ns_per_ray']:.1f} ns/ray")
-    return [store.get(k, ignore_force=True) for k in keys]
+    return [dict(store.get(k, ignore_force=True), **store.provenance(k)) for k in keys]
 
 
 def loso_predictions(df: pd.DataFrame, key: str) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -166,7 +166,7 @@ def run(args, log=print) -> dict:
     repeats = args.repeats or (5 if quick else 9)  # the curves are flat: more rounds against load noise
     lams = QUICK_LAMBDAS if quick else LAMBDAS
     out_dir = Path(args.out) / "wald-fig6"
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
     rows = []
     for name in names:
         scene = load_scene(name)

@@ -58,7 +58,7 @@ def run(args, log=print) -> dict:
     side = args.side or (128 if quick else 512)
     repeats = args.repeats or 5
     out_dir = Path(args.out) / "wald-fig7"
-    store = PointStore(args.out, force=args.force)
+    store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
     rows = []
     for name in names:
         scene = load_scene(name)

@@ -126,8 +126,9 @@ def build(scene, name: str = "grid", **params) -> Accel:
     if name not in STRUCTURES:
         raise GridcostError(f"unknown structure {name!r}; known: {', '.join(STRUCTURES)}")
     modname, clsname = STRUCTURES[name].split(":")
+    cls = getattr(importlib.import_module(modname), clsname)
     try:
-        cls = getattr(importlib.import_module(modname), clsname)
-    except ModuleNotFoundError:
-        raise GridcostError(f"structure {name!r} is not available in this build") from None
-    return cls(**params).build(scene)
+        inst = cls(**params)
+    except TypeError as exc:  # an unknown or missing parameter is the caller's input error
+        raise GridcostError(f"structure {name!r}: bad parameters {params!r} ({exc})") from None
+    return inst.build(scene)

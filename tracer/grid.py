@@ -85,14 +85,16 @@ def _cell_range(lo, hi, g0, ic, n):
 @jit
 def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
     """Assign triangles to cells: count pass (``fill=False``: counts into cell_start[c + 1]) or fill
-    pass (``fill=True``: cell_start is the prefix sum; tri_ids filled in triangle order per cell).
-    Candidate cells come from the triangle's bounds; ``exact`` keeps only cells the triangle overlaps
-    (separating-axis test against the cell enlarged by CELL_EPS)."""
+    pass (``fill=True``: cell_start[c + 1] holds cell c's start, :func:`starts_shifted`, and is used
+    as its write cursor, so after the pass cell_start[c + 1] is cell c's end: the prefix sum, with no
+    cursor array). tri_ids are filled in triangle order per cell. Candidate cells come from the
+    triangle's bounds; ``exact`` keeps only cells the triangle overlaps (separating-axis test against
+    the cell enlarged by CELL_EPS). Returns the number of references (int64: the count pass may
+    exceed the int32 range, which the caller refuses)."""
     hx = 0.5 * gp[3] * (1.0 + 2 * CELL_EPS)
     hy = 0.5 * gp[4] * (1.0 + 2 * CELL_EPS)
     hz = 0.5 * gp[5] * (1.0 + 2 * CELL_EPS)
-    cursor = np.zeros(nx * ny * nz, dtype=np.int64) if fill else np.zeros(0, dtype=np.int64)
-    refs = 0
+    refs = np.int64(0)
     for t in range(tris.shape[0]):
         ax = np.float64(tris[t, 0, 0]); ay = np.float64(tris[t, 0, 1]); az = np.float64(tris[t, 0, 2])
         bx = np.float64(tris[t, 1, 0]); by = np.float64(tris[t, 1, 1]); bz = np.float64(tris[t, 1, 2])
@@ -111,12 +113,48 @@ def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
                             continue
                     c = i + nx * (j + ny * k)
                     if fill:
-                        tri_ids[cell_start[c] + cursor[c]] = t
-                        cursor[c] += 1
+                        tri_ids[cell_start[c + 1]] = t
+                        cell_start[c + 1] += 1
                     else:
                         cell_start[c + 1] += 1
                     refs += 1
     return refs
+
+
+@jit
+def starts_shifted(cell_start):
+    """Counts in cell_start[c + 1] -> cell c's start in cell_start[c + 1] (an exclusive prefix sum
+    one place to the right), in place: the fill pass of :func:`grid_assign` advances it to the end."""
+    s = 0
+    for c in range(cell_start.shape[0] - 1):
+        n = cell_start[c + 1]
+        cell_start[c + 1] = s
+        s += n
+
+
+@jit
+def occupancy_bits(cell_start, out):
+    """Bit c of ``out`` (little-endian within each byte, as ``np.packbits(..., bitorder='little')``)
+    set where cell c holds a triangle; ``out`` zeroed, (ncell + 7) // 8 bytes."""
+    for c in range(cell_start.shape[0] - 1):
+        if cell_start[c + 1] > cell_start[c]:
+            out[c >> 3] |= np.uint8(1 << (c & 7))
+
+
+#: bytes a grid build holds per cell (int32 cell_start + occupancy bit), per reference (int32 id)
+#: and per copied reference (9 float32 vertices, "copy" layout); :func:`grid_build_bytes`
+BUILD_BYTES_PER_CELL = 4 + 1 / 8
+BUILD_BYTES_PER_REF = 4
+
+
+def grid_build_bytes(ncell: int, refs: int, n: int, layout: str = "copy", macro: int = 0) -> int:
+    """Peak bytes a grid build allocates (cell array, occupancy bits, reference ids, vertex rows in
+    cell order or one per triangle, and with macrocells the block occupancy pass: an int32 diff,
+    two bool arrays); checked against the measured peak by tests/test_memory.py."""
+    b = ncell * BUILD_BYTES_PER_CELL + refs * BUILD_BYTES_PER_REF + (refs if layout == "copy" else n) * TRI_ROW_BYTES
+    if macro:
+        b += ncell * (4 + 1 + 1)
+    return int(b + 4)
 
 
 # ---------------------------------------------------------------- traversal
@@ -280,6 +318,35 @@ def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
     return np.ascontiguousarray(pad.reshape(bz, k, by, k, bx, k).any(axis=(1, 3, 5)).astype(np.uint8).ravel())
 
 
+def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0):
+    """The grid build shared by the one-level grid and the packet grid: count references per cell
+    into an int32 array, turn the counts into starts in place, fill the ids (the starts advance to
+    the ends: no cursor array), copy vertex rows per ``layout`` ("auto" through :func:`choose_layout`)
+    and set the occupancy bits. The memory guard checks :func:`grid_build_bytes` before allocating
+    (before counting with one reference per triangle, after counting with the real count).
+    Returns (cell_start, tri_ids, tri_verts, occupancy bits, layout)."""
+    ncell = int(np.prod(res))
+    what = f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}"
+    if ncell >= 2**31:
+        raise GridcostError(f"{what}: over the int32 cell index range")
+    check_budget(what, grid_build_bytes(ncell, scene.n, scene.n, "copy", macro))
+    nx, ny, nz = (int(r) for r in res)
+    cell_start = np.zeros(ncell + 1, dtype=np.int32)  # counts, then starts, then ends (grid_assign)
+    refs = int(grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, np.zeros(0, np.int32), False))
+    if refs >= 2**31:
+        raise GridcostError(f"{what}: {refs:,} triangle references exceed the int32 index range")
+    layout = choose_layout(layout, scene.n, refs)
+    check_budget(f"{what} with {refs:,} triangle references", grid_build_bytes(ncell, refs, scene.n, layout, macro))
+    starts_shifted(cell_start)
+    tri_ids = np.empty(refs, dtype=np.int32)
+    grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, tri_ids, True)
+    tv = scene.tris.reshape(-1, 9)
+    tri_verts = np.ascontiguousarray(tv if layout == "index" else tv[tri_ids])
+    occ = np.zeros((ncell + 7) // 8, np.uint8)
+    occupancy_bits(cell_start, occ)
+    return cell_start, tri_ids, tri_verts, occ, layout
+
+
 class UniformGrid(Accel):
     """One-level uniform grid (Ize 2007 Sec 2; pbrt-v2 GridAccel).
 
@@ -321,28 +388,11 @@ class UniformGrid(Accel):
 
     def build(self, scene):
         res = self._resolution(scene)
-        ncell = int(np.prod(res))
-        check_budget(f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}",
-                     (ncell + 1) * 4 + scene.n * 40 * 2)
         t_start = time.perf_counter()
         gp = grid_params(scene.bounds, res)
-        nx, ny, nz = (int(r) for r in res)
-        cell_start = np.zeros(ncell + 1, dtype=np.int64)
-        dummy = np.zeros(0, dtype=np.int32)
-        refs = grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, dummy, False)
-        check_budget(f"a grid with {refs:,} triangle references over {ncell:,} cells of {scene.name}",
-                     (ncell + 1) * 4 + refs * 40)
-        if refs >= 2**31:
-            raise GridcostError(f"{refs:,} triangle references exceed the int32 index range")
-        np.cumsum(cell_start, out=cell_start)
-        tri_ids = np.empty(refs, dtype=np.int32)
-        grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, tri_ids, True)
-        self.cell_start_ = cell_start.astype(np.int32)
-        self.tri_ids_ = tri_ids
-        self.layout_ = choose_layout(self.layout, scene.n, refs)
-        tv = scene.tris.reshape(-1, 9)
-        self.tri_verts_ = np.ascontiguousarray(tv if self.layout_ == "index" else tv[tri_ids])
-        self.occ_ = np.packbits(np.diff(self.cell_start_) > 0, bitorder="little")
+        cell_start, tri_ids, tri_verts, occ, layout = fill_cells(scene, res, gp, self.exact, self.layout, self.macro)
+        refs = len(tri_ids)
+        self.cell_start_, self.tri_ids_, self.tri_verts_, self.occ_, self.layout_ = cell_start, tri_ids, tri_verts, occ, layout
         self.mshift_ = int(self.macro).bit_length() - 1 if self.macro else 0
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start

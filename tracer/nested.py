@@ -35,7 +35,7 @@ from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_cursor, dda_setup, ray_box, ray_triangle
-from tracer.grid import grid_assign, grid_params, res_from_cells
+from tracer.grid import grid_assign, grid_params, res_from_cells, starts_shifted
 from tracer.memory import check_budget
 
 NCOUNT = len(COUNTER_NAMES)
@@ -61,22 +61,41 @@ def eq16_exponent(levels_left: int) -> float:
     return 3.0 / (2 * levels_left + 1)
 
 
+# ---------------------------------------------------------------- memory guard
+#: peak bytes one level of the build holds per cell (int64 counts/starts, their diff, the cell
+#: entries, leaf lengths and ends, boolean masks) and per triangle reference (ids, the per-grid
+#: vertex gathers of the assignment, the gathered leaf ids, the final vertex rows): measured with
+#: tracemalloc over two- and three-level grids of 0.15-1.2 M cells (tests/test_memory.py)
+NESTED_BYTES_PER_CELL = 44
+NESTED_BYTES_PER_REF = 82
+
+
+def nested_level_bytes(kept: int, cells: int, refs: int) -> int:
+    """Estimated peak while building a level of ``cells`` cells and ``refs`` references, beside the
+    ``kept`` bytes of the levels above."""
+    return int(kept + cells * NESTED_BYTES_PER_CELL + refs * NESTED_BYTES_PER_REF)
+
+
 # ---------------------------------------------------------------- build kernels
 @pjit
 def _assign_level(tris, gf, gres, off, lst_start, lst_ids, exact, cs, out_ids, fill):
     """Assign the triangles of every grid of one level (``grid_assign`` on each grid's triangle list).
 
     Count pass (``fill=False``): grid g's cell c count goes to cs[off[g] + c + 1] (disjoint between
-    grids). Fill pass: ``cs`` is the prefix sum; out_ids receives global triangle ids."""
+    grids). Fill pass: cs[k + 1] holds global cell k's start (:func:`tracer.grid.starts_shifted`) and
+    advances to its end, so afterwards ``cs`` is the prefix sum; out_ids receives global triangle
+    ids. Grid g writes only cs[off[g] + 1 .. off[g + 1]], so its range is read from those entries
+    (cs[off[g]] belongs to the previous grid, which may still be filling it)."""
     for g in prange(gf.shape[0]):
         ids = lst_ids[lst_start[g]:lst_start[g + 1]]
         sub = tris[ids]
         o = off[g]
         n = off[g + 1] - o
         view = cs[o:o + n + 1]
+        r0 = cs[o + 1]
         grid_assign(sub, gf[g], gres[g, 0], gres[g, 1], gres[g, 2], exact, view, out_ids, fill)
         if fill:
-            for r in range(cs[o], cs[o + n]):
+            for r in range(r0, cs[o + n]):
                 out_ids[r] = ids[out_ids[r]]
 
 
@@ -316,7 +335,7 @@ class NestedGrid(Accel):
         ncell1 = int(np.prod(res1))
         what = f"a {levels}-level nested grid of {scene.name}"
         check_budget(f"{what}: top grid {res1[0]}x{res1[1]}x{res1[2]} ({ncell1:,} cells)",
-                     ncell1 * 16 + n * 44 * 2)
+                     nested_level_bytes(0, ncell1, n))
         t_start = time.perf_counter()
         tris = scene.tris
         cur_gf = grid_params(scene.bounds, res1)[None, :]
@@ -325,7 +344,8 @@ class NestedGrid(Accel):
         lst_ids = np.arange(n, dtype=np.int32)
         gf_parts, gi_parts, cell_parts, id_parts = [], [], [], []
         g_total = cell_total = refs_total = 0
-        mem = 0
+        mem = 0  # bytes of the levels kept so far (cell entries, leaf ids)
+        self.peak_estimate_ = 0
         self.level_stats_ = []
         for level in range(1, levels + 1):
             ng = len(cur_gf)
@@ -333,16 +353,16 @@ class NestedGrid(Accel):
             off = np.zeros(ng + 1, np.int64)
             np.cumsum(ncell, out=off[1:])
             total = int(off[-1])
-            mem += total * 8
             check_budget(f"{what}: level {level} with {ng:,} grids and {total:,} cells",
-                         mem + total * 8 + refs_total * 44 + int(lst_ids.size) * 44)
+                         nested_level_bytes(mem, total, int(lst_ids.size)))
             cs = np.zeros(total + 1, np.int64)
             dummy = np.zeros(0, np.int32)
             _assign_level(tris, cur_gf, cur_res, off, lst_start, lst_ids, self.exact, cs, dummy, False)
-            np.cumsum(cs, out=cs)
-            refs_l = int(cs[-1])
-            check_budget(f"{what}: level {level} with {total:,} cells and {refs_l:,} triangle references",
-                         mem + total * 8 + refs_l * 8 + (refs_total + refs_l) * 44)
+            refs_l = int(cs.sum())
+            starts_shifted(cs)  # the fill pass advances the starts to the ends: cs is then the prefix sum
+            est = nested_level_bytes(mem, total, refs_l)
+            self.peak_estimate_ = max(self.peak_estimate_, est)
+            check_budget(f"{what}: level {level} with {total:,} cells and {refs_l:,} triangle references", est)
             if refs_total + refs_l >= 2**31:
                 raise GridcostError(f"{refs_total + refs_l:,} triangle references exceed the int32 index range")
             ids_l = np.empty(refs_l, np.int32)
@@ -389,6 +409,7 @@ class NestedGrid(Accel):
             g_total += ng
             cell_total += total
             refs_total += int(lens.sum())
+            mem += ent.nbytes + gi.nbytes + cur_gf.nbytes + id_parts[-1].nbytes
             if not len(cidx):
                 break
             # the next level: one grid per child cell, spanning exactly that cell

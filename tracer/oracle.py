@@ -55,14 +55,16 @@ def oracle_intersect(scene, origins, directions, tmin: float = 0.0, tmax=None):
 
 def oracle_cached(scene, origins, directions, tmin: float = 0.0, tmax=None):
     """:func:`oracle_intersect` with its answer kept in the mesh cache ($GRIDCOST_CACHE), keyed by
-    the triangles, the rays and the ray range, so verifying several structures pays once."""
+    the triangles, the rays, the ray range and the tracer's source digest (an answer computed by other
+    code is never reused), so verifying several structures pays once."""
     import hashlib
 
     import numpy as np
 
+    from tracer.provenance import tracer_digest
     from tracer.scene import _atomic_savez, cache_dir
     o, d = as_rays(origins, directions)
-    h = hashlib.sha1()
+    h = hashlib.sha1(tracer_digest().encode())
     for a in (scene.tris, o, d, tmax_array(tmax, len(o)), np.float64(tmin)):
         h.update(np.ascontiguousarray(a).tobytes())
     path = cache_dir() / "oracle" / f"{h.hexdigest()}.npz"
@@ -70,7 +72,7 @@ def oracle_cached(scene, origins, directions, tmin: float = 0.0, tmax=None):
         try:
             z = np.load(path)
             return Hits(z["t"], z["tri_id"]), z["ties"]
-        except Exception:
+        except (OSError, ValueError, KeyError):  # a corrupt cache entry is recomputed
             pass
     hits, ties = oracle_intersect(scene, o, d, tmin, tmax)
     _atomic_savez(path, t=hits.t, tri_id=hits.tri_id, ties=ties)

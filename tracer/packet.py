@@ -51,8 +51,7 @@ from tracer.accel import COUNTER_NAMES, Accel, Counters, Hits, as_rays, tmax_arr
 from tracer.constants import WALD_LAMBDA, WALD_MACROCELL
 from tracer.errors import GridcostError
 from tracer.geometry import INF, PARALLEL_COS, ray_box
-from tracer.grid import grid_assign, grid_params, grid_ray, macro_occupancy, res_wald
-from tracer.memory import check_budget
+from tracer.grid import fill_cells, grid_params, grid_ray, macro_occupancy, res_wald
 
 NCOUNT = len(COUNTER_NAMES)
 #: per-packet counter columns of :meth:`CoherentGrid.packet_counters`; tests_* are ray-triangle
@@ -568,26 +567,12 @@ class CoherentGrid(Accel):
         res = np.asarray(self.res, np.int64) if self.res is not None else res_wald(scene.bounds, scene.n, self.lam)
         if res.shape != (3,) or (res < 1).any():
             raise GridcostError(f"grid resolution must be three positive integers, got {res}")
-        ncell = int(np.prod(res))
-        check_budget(f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}",
-                     (ncell + 1) * 4 + scene.n * 40 * 2)
         t_start = time.perf_counter()
         gp = grid_params(scene.bounds, res)
-        nx, ny, nz = (int(r) for r in res)
-        cell_start = np.zeros(ncell + 1, dtype=np.int64)
-        refs = grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, np.zeros(0, np.int32), False)
-        check_budget(f"a grid with {refs:,} triangle references over {ncell:,} cells of {scene.name}",
-                     (ncell + 1) * 4 + refs * 40)
-        if refs >= 2**31:
-            raise GridcostError(f"{refs:,} triangle references exceed the int32 index range")
-        np.cumsum(cell_start, out=cell_start)
-        tri_ids = np.empty(refs, dtype=np.int32)
-        grid_assign(scene.tris, gp, nx, ny, nz, self.exact, cell_start, tri_ids, True)
-        self.cell_start_ = cell_start.astype(np.int32)
-        self.tri_ids_ = tri_ids
-        self.tri_verts_ = np.ascontiguousarray(scene.tris.reshape(-1, 9)[tri_ids])
-        #: one bit per cell, set when the cell holds a triangle (little-endian bit order)
-        self.occupied_ = np.packbits(np.diff(self.cell_start_) > 0, bitorder="little")
+        #: occupied_: one bit per cell, set when the cell holds a triangle (little-endian bit order)
+        self.cell_start_, self.tri_ids_, self.tri_verts_, self.occupied_, _ = fill_cells(
+            scene, res, gp, self.exact, "copy", self.macro)
+        refs = len(self.tri_ids_)
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start
         self.res_, self.gp_, self.n_, self.refs_ = res, gp, scene.n, refs

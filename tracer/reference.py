@@ -64,6 +64,15 @@ class TrimeshAccel(Accel):
 
     name = "trimesh"
 
+    @staticmethod
+    def available() -> bool:
+        """trimesh's ray tracer needs rtree."""
+        try:
+            import rtree  # noqa: F401
+            return True
+        except ImportError:
+            return False
+
     def build(self, scene):
         import trimesh
         from trimesh.ray.ray_triangle import RayMeshIntersector

@@ -1,12 +1,17 @@
 """Fair timing: warm-up call first, then the median of >= 5 repeats; thread pinning."""
 from __future__ import annotations
 
+import functools
 import os
 import platform
+import sys
 import time
 from typing import Callable, NamedTuple
 
 import numpy as np
+from numba import prange
+
+from tracer._jit import pjit
 
 
 class Timing(NamedTuple):
@@ -25,18 +30,86 @@ class Timing(NamedTuple):
 MIN_SAMPLE_SECONDS = 0.02
 
 
+#: the thread clock is trusted when it reads at least this fraction of wall time on a known
+#: single-thread kernel (a busy machine lowers the ratio by preemption, a worker-thread threading
+#: layer to ~0)
+THREAD_CLOCK_MIN_RATIO = 0.9
+
+
+@functools.lru_cache(maxsize=1)
+def thread_clock_check() -> dict:
+    """Once per process: does ``time.thread_time`` see the work of a one-thread ``prange`` kernel?
+    Under a threading layer that runs ``prange`` work on a worker thread the calling thread's CPU
+    time reads almost nothing, and every ratio against it would inflate. Returns {ok, ratio, wall,
+    thread}: the best of three runs of :func:`_probe_kernel` (~30 ms each)."""
+    import numba
+    n = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        x = np.arange(1 << 16, dtype=np.float64)
+        _probe_kernel(x, 1)
+        best = (0.0, 0.0, 0.0)
+        for _ in range(3):
+            w0, c0 = time.perf_counter(), time.thread_time()
+            _probe_kernel(x, 120)
+            wall, cpu = time.perf_counter() - w0, time.thread_time() - c0
+            if wall > 0 and cpu / wall > best[0]:
+                best = (cpu / wall, wall, cpu)
+    finally:
+        numba.set_num_threads(n)
+    return {"ok": best[0] >= THREAD_CLOCK_MIN_RATIO, "ratio": round(best[0], 4), "wall": best[1], "thread": best[2]}
+
+
+@pjit
+def _probe_kernel(x, reps):
+    """A known amount of single-ray-like work through ``prange`` (as every batched kernel runs)."""
+    acc = 0.0
+    for th in prange(1):
+        s = 0.0
+        for _ in range(reps):
+            for i in range(x.shape[0]):
+                s += np.sqrt(x[i] + s * 1e-9)
+        acc += s
+    return acc
+
+
+_WARNED = []
+
+
 def default_clock() -> Callable[[], float]:
     """The clock timings use: with one Numba thread the work runs on the calling thread, so its CPU
-    time (``time.thread_time``) measures the work and not the waits of a shared, busy machine; with
-    more threads, wall time (``time.perf_counter``). ``GRIDCOST_CLOCK=wall`` forces wall time."""
+    time (``time.thread_time``) measures the work and not the waits of a shared, busy machine --
+    provided :func:`thread_clock_check` finds it does see a kernel's work; otherwise, and with more
+    threads, wall time (``time.perf_counter``). ``GRIDCOST_CLOCK=wall`` forces wall time."""
     import numba
-    if os.environ.get("GRIDCOST_CLOCK", "") != "wall" and numba.get_num_threads() == 1:
-        return time.thread_time
-    return time.perf_counter
+    if os.environ.get("GRIDCOST_CLOCK", "") == "wall" or numba.get_num_threads() != 1:
+        return time.perf_counter
+    chk = thread_clock_check()
+    if not chk["ok"]:
+        if not _WARNED:
+            _WARNED.append(1)
+            print(f"gridcost: the thread CPU clock read {chk['ratio']:.1%} of wall time on a one-thread kernel "
+                  f"(work runs on another thread?); timing with wall time instead", file=sys.stderr)
+        return time.perf_counter
+    return time.thread_time
 
 
 def clock_name() -> str:
     return "thread CPU time" if default_clock() is time.thread_time else "wall time"
+
+
+#: builds are timed with wall time: a library may build on its own threads, which the calling
+#: thread's CPU time would not see
+build_clock = time.perf_counter
+
+
+_CALLS = [0]
+
+
+def timing_calls() -> int:
+    """How many :func:`time_call` timings this process has taken (lets the result writer tell a
+    file measured now from one drawn from stored points)."""
+    return _CALLS[0]
 
 
 def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
@@ -45,6 +118,7 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     a sample runs ``fn`` back to back until it lasts ``min_sample`` seconds and is reported per call.
     ``clock`` defaults to :func:`default_clock`."""
     clock = clock or default_clock()
+    _CALLS[0] += 1
     for _ in range(warmup):
         fn()
     t0 = clock()
@@ -100,16 +174,10 @@ def set_threads(n: int | None) -> int:
 
 
 def host_info() -> dict:
-    cpu = platform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
     import numba
-    return {"cpu": cpu, "cores": os.cpu_count(), "machine": platform.machine(),
+
+    from tracer.provenance import cpu_model, host
+    return {"host": host(), "cpu": cpu_model(), "cores": os.cpu_count(), "machine": platform.machine(),
             "python": platform.python_version(), "numba_threads": numba.get_num_threads(),
-            "clock": clock_name(), "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
+            "clock": clock_name(), "thread_clock_check": thread_clock_check(),
+            "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
