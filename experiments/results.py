@@ -179,8 +179,8 @@ class Ledger:
         """The value of each provenance column for a row that does not carry its own: the distinct
         values behind the file joined by ';' (one value when one commit measured everything)."""
         src = self.sources()
-        if not src:
-            return {c: "derived (see the input files' meta.json)" for c in PROVENANCE_COLUMNS}
+        if not src:  # counts or derived numbers computed now, no timing (inputs: see meta.json)
+            return dict(self.now(), clock="none (no timing in this file)")
         return {c: ";".join(sorted({str(o[c]) for o in src})) for c in PROVENANCE_COLUMNS}
 
 
