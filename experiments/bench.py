@@ -16,7 +16,7 @@ import time
 
 
 from experiments.common import add_scene_args, emit_json, scene_from_args
-from experiments.results import write_json
+from experiments.results import progress, write_json
 from tracer.accel import build
 from tracer.rays import make_rays
 from tracer.timing import build_clock, host_info, set_threads, time_call
@@ -69,7 +69,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
            "host": host_info(), "structures": {}, "unavailable": {}}
-    for name in names:
+    for name in progress(names, f"bench {scene.name}", quiet=log is not print, unit="structure"):
         t0 = time.perf_counter()
         if name == "embree":
             if not EmbreeAccel.available():

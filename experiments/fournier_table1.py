@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import atomic_write, finish_figure, log_scale, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, log_scale, progress, write_csv, write_meta
 
 TARGET = "fournier-table1"
 
@@ -141,7 +141,7 @@ def run(args, log=print) -> dict:
     flat_max = args.flat_max or (5000 if quick else 40000)
     out_dir = Path(args.out) / TARGET
     rows = []
-    for name in names:
+    for name in progress(names, "fournier-table1", quiet=log is not print):
         rows += measure_scene(name, args, res, repeats, flat_max, log=log)
     df = pd.DataFrame(rows)
     wide = _wide(df)

@@ -14,7 +14,7 @@ import pandas as pd
 
 from costmodel.select import GRID_FACTOR, havran_stats, records
 from experiments.hapala_table1 import PAPER, PAPER_MATCH, default_scenes, load_any
-from experiments.results import atomic_write, write_csv, write_meta
+from experiments.results import atomic_write, progress, write_csv, write_meta
 
 COLS = ["sparseness_eq1", "sparseness_cells", "max_refs", "mean", "variance", "sigma", "skewness", "kurtosis"]
 
@@ -40,7 +40,7 @@ def run(args, log=print) -> pd.DataFrame:
     raw = {r["scene"]: r for r in json.loads(raw_path.read_text())} if raw_path.exists() else {}
     names = args.scenes.split(",") if args.scenes else (list(raw) or default_scenes(args.quick))
     rows = []
-    for name in names:
+    for name in progress(names, "havran", quiet=getattr(args, "json", False)):
         r = stats_for(name, args.grid_factor)
         t = raw.get(name)
         if t and "kdtree" in t["hier"]:

@@ -18,7 +18,7 @@ import pandas as pd
 
 from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
                               time_stats)
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_json, write_meta
+from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_json, write_meta
 from tracer.timing import set_threads
 
 KINDS = ("random", "path")
@@ -218,7 +218,7 @@ def measure_all(names, cfg: dict, out, force: bool = False, log=print, repeat_pa
     same again as an independent retest."""
     store = PointStore(out, force=force, code=MEASURE_CODE, reuse_stale=reuse_stale)
     raw = []
-    for i, name in enumerate(names):
+    for i, name in enumerate(progress(names, "table1h calibration", quiet=log is not print)):
         key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "protocol": PROTOCOL, **cfg}
         if repeat_pass > 1:
             key["pass"] = repeat_pass

@@ -84,6 +84,14 @@ def save_figure(fig, name: str, out_dir=None) -> list[Path]:
     return paths
 
 
+def progress(iterable, desc: str, total: int | None = None, quiet: bool = False, unit: str = "scene"):
+    """A tqdm progress bar with ETA over ``iterable`` on stderr; silent under ``--json`` (``quiet``)
+    and when stderr is not a terminal (or TQDM_DISABLE=1)."""
+    from tqdm import tqdm
+    disable = True if quiet or os.environ.get("TQDM_DISABLE") == "1" else None
+    return tqdm(iterable, desc=desc, total=total, unit=unit, leave=False, disable=disable, dynamic_ncols=True)
+
+
 def log_scale(ax, axis: str, values) -> bool:
     """Put ``axis`` ("x" or "y") of ``ax`` on a log scale when ``values`` hold a positive finite
     number; otherwise leave it linear and say on the panel that there is nothing to draw on a log

@@ -8,6 +8,7 @@ from __future__ import annotations
 import time
 
 from experiments.common import add_scene_args, emit_json, parse_params, scene_from_args
+from experiments.results import progress
 from tracer.accel import build
 from tracer.oracle import compare, oracle_cached
 from tracer.rays import KINDS, make_rays
@@ -67,7 +68,7 @@ def _many(args, kinds, structure: str) -> int:
     from experiments.results import atomic_write, write_json
     from tracer.scene import load_scene
     outs = []
-    for name in args.scene.split(","):
+    for name in progress(args.scene.split(","), f"verify {args.structure}", quiet=getattr(args, "json", False)):
         t0 = time.perf_counter()
         out = run_verify(load_scene(name), structure, parse_params(args.param), kinds, args.rays, args.seed)
         out["seconds"] = time.perf_counter() - t0

@@ -21,7 +21,7 @@ import pandas as pd
 
 from costmodel.packet import PacketCostFit, best_config
 from experiments.common import scene_list
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_meta
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -168,7 +168,7 @@ def run(args, log=print) -> dict:
     out_dir = Path(args.out) / "wald-fig6"
     store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
     rows = []
-    for name in names:
+    for name in progress(names, "wald-fig6", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
         rows += measure_points(store, "wald-fig6", scene, [{"lam": float(lam), "packet": args.packet} for lam in lams],
                                side, repeats, threads, log)

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.common import scene_list
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_meta
 from experiments.wald_fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -60,7 +60,7 @@ def run(args, log=print) -> dict:
     out_dir = Path(args.out) / "wald-fig7"
     store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
     rows = []
-    for name in names:
+    for name in progress(names, "wald-fig7", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
         rows += measure_points(store, "wald-fig7", scene, [{"lam": float(args.lam), "packet": k} for k in PACKETS],
                                side, repeats, threads, log)

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, progress, write_csv, write_meta
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -74,7 +74,7 @@ def run(args, log=print) -> dict:
     out_dir = Path(args.out) / "wald-table1"
     paper = {p[0]: p for p in PAPER}
     rows = []
-    for name in names:
+    for name in progress(names, "wald-table1", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
         row = count_tests(scene, side, args.packet, args.exact)
         if not args.no_kdtree:

@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, write_csv, write_meta
+from experiments.results import atomic_write, finish_figure, progress, write_csv, write_meta
 from experiments.wald_table1 import count_tests
 from tracer.grid import UniformGrid
 from tracer.rays import camera_rays
@@ -57,7 +57,7 @@ def run(args, log=print) -> dict:
     out_dir = Path(args.out) / "wald-table4"
     paper = {p[0]: p for p in PAPER}
     rows = []
-    for name in names:
+    for name in progress(names, "wald-table4", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
         p4 = count_tests(scene, side, 4, args.exact, macro=0)
         p8 = count_tests(scene, side, 8, args.exact, macro=0)
