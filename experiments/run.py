@@ -38,6 +38,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "exponents": ("experiments.ize_exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
     "predict": ("experiments.ize_predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
     "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
+    "models": ("experiments.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 
 #: targets that `all` runs, in order

@@ -1,14 +1,19 @@
-"""Scenes: loading meshes through trimesh, validation, the parsed-mesh cache and the named-scene
-registry (every mesh of ``MANIFEST.tsv`` plus the procedural scenes of :mod:`tracer.procedural`).
+"""Scenes: loading meshes through trimesh, validation, the parsed-mesh cache and the named scenes
+(every mesh of the registry :mod:`tracer.registry`, plus the procedural scenes of :mod:`tracer.procedural`).
 
-Models directory: ``--models DIR`` (CLI) → ``$GRIDCOST_MODELS`` → ``../shared/models`` beside the
-repository. Parsed meshes are cached as ``.npz`` keyed by the file's sha256 under
-``$GRIDCOST_CACHE`` (default ``~/.cache/gridcost``), never in git.
+A named mesh is looked for in ``--models DIR`` / ``$GRIDCOST_MODELS``, then ``../shared/models`` beside
+the repository, then the meshes shipped in the package (``tracer/data``), then the user cache, then
+downloaded (pooch, sha256-verified); a mesh found nowhere is replaced by a labelled stand-in (see
+:mod:`tracer.registry`). Parsed meshes are cached as ``.npz`` keyed by the file's sha256 under
+``$GRIDCOST_CACHE`` (default ``platformdirs.user_cache_dir("gridcost")``, ``~/.cache/gridcost`` on
+Linux), never in git. Mesh files may be gzip- or xz-compressed (``.ply.gz``, ``.obj.xz``).
 """
 from __future__ import annotations
 
 import csv
+import gzip
 import hashlib
+import io
 import logging
 import os
 import re
@@ -95,20 +100,52 @@ def validate(tris: np.ndarray, where: str) -> dict:
 
 # ---------------------------------------------------------------- files
 def models_dir() -> Path:
-    env = os.environ.get("GRIDCOST_MODELS")
-    return Path(env).expanduser() if env else (REPO / ".." / "shared" / "models").resolve()
+    """The first models directory of the lookup: ``$GRIDCOST_MODELS`` when set, else ``../shared/models``."""
+    from tracer import registry
+    return registry.env_models_dir() or registry.shared_models_dir() or Path(registry.SHARED_MODELS).resolve()
 
 
 def cache_dir() -> Path:
-    return Path(os.environ.get("GRIDCOST_CACHE", Path.home() / ".cache" / "gridcost")).expanduser()
+    """The user cache (``$GRIDCOST_CACHE``, else ``platformdirs.user_cache_dir("gridcost")``)."""
+    from tracer import registry
+    return registry.cache_root()
+
+
+_FILE_HASHES: dict = {}
 
 
 def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    """sha256 of the file's bytes (as stored), memoized per path, size and mtime."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _FILE_HASHES:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+        _FILE_HASHES[key] = h.hexdigest()
+    return _FILE_HASHES[key]
+
+
+def _formats(path: Path) -> tuple[str, str | None]:
+    """(mesh format suffix, compression suffix or None): ``x.ply`` -> (".ply", None), ``x.ply.gz`` ->
+    (".ply", ".gz")."""
+    suffix = path.suffix.lower()
+    if suffix in (".gz", ".xz"):
+        return Path(path.stem).suffix.lower(), suffix
+    return suffix, None
+
+
+def _decompressed(path: Path, compression: str) -> bytes:
+    try:
+        if compression == ".gz":
+            with gzip.open(path, "rb") as f:
+                return f.read()
+        import lzma
+        with lzma.open(path, "rb") as f:
+            return f.read()
+    except (OSError, EOFError, ImportError) as exc:
+        raise GridcostError(f"{path}: cannot decompress ({exc})") from None
 
 
 def _decode_strips(strips) -> np.ndarray:
@@ -127,14 +164,34 @@ def _decode_strips(strips) -> np.ndarray:
     return np.asarray(out, dtype=np.int64).reshape(-1, 3)
 
 
+def _list_rows(val) -> list:
+    """Rows of a PLY list property as trimesh returns it: a 2-D array or list of rows (ASCII), or a
+    structured array of (count, indices) pairs (binary: fields ``f0`` count, ``f1`` the indices)."""
+    if isinstance(val, np.ndarray) and val.dtype.names:
+        names = val.dtype.names
+        counts = np.asarray(val[names[0]]).reshape(-1)
+        idx = np.asarray(val[names[-1]]).reshape(len(counts), -1)
+        return [row[:int(c)] for row, c in zip(idx, counts)]
+    return list(val)
+
+
 def _ply_strips(mesh) -> list | None:
+    """The rows of the PLY's triangle-strip element (``tristrips``), or None. trimesh gives the element's
+    data as a dict of properties (ASCII) or as one structured array (binary)."""
     raw = (getattr(mesh, "metadata", None) or {}).get("_ply_raw") or {}
     for name, element in raw.items():
-        if "strip" in name.lower():
-            data = element.get("data", {})
-            for key, val in data.items():
-                if "vertex" in key or "indices" in key:
-                    return list(val)
+        if "strip" not in name.lower():
+            continue
+        data = element.get("data", {}) if isinstance(element, dict) else element
+        if isinstance(data, dict):
+            items = list(data.items())
+        elif isinstance(data, np.ndarray) and data.dtype.names:
+            items = [(key, data[key]) for key in data.dtype.names]
+        else:
+            continue
+        for key, val in items:
+            if "vertex" in key or "indices" in key:
+                return _list_rows(val)
     return None
 
 
@@ -165,16 +222,20 @@ def _read(path: Path):
     import trimesh
     logging.getLogger("trimesh").setLevel(logging.ERROR)
     kwargs = {"process": False}
-    suffix = path.suffix.lower()
+    suffix, compression = _formats(path)
     if suffix in (".obj", ".ply"):
         kwargs["skip_materials"] = True  # geometry never needs textures (and Pillow may be absent)
+    data = _decompressed(path, compression) if compression else None
     try:
         if suffix == ".obj":
-            data = path.read_bytes()
+            data = path.read_bytes() if data is None else data
             if _OBJ_REL.search(data):
                 v, f = _obj_relative(data)
                 return trimesh.Trimesh(vertices=v, faces=f, process=False)
-        loaded = trimesh.load(str(path), **kwargs)
+        if compression:
+            loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], **kwargs)
+        else:
+            loaded = trimesh.load(str(path), **kwargs)
     except Exception as exc:  # trimesh raises many types for malformed files
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise GridcostError(f"{path}: cannot parse ({msg})") from None
@@ -190,16 +251,18 @@ def _read(path: Path):
 
 
 def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
-    """Load a mesh file (OBJ, PLY, OFF, STL, GLB/GLTF) into a validated :class:`Scene`."""
+    """Load a mesh file (OBJ, PLY, OFF, STL, GLB/GLTF; optionally .gz/.xz compressed) into a validated
+    :class:`Scene`."""
     path = Path(path)
     if not path.exists():
         raise GridcostError(f"{path}: no such file")
     if path.is_dir():
         raise GridcostError(f"{path}: is a directory, not a mesh file")
-    if path.suffix.lower() not in FORMATS:
-        raise GridcostError(f"{path}: unknown mesh format {path.suffix or '(no extension)'!r}; "
-                            f"known: {', '.join(sorted(FORMATS))}")
-    name = name or path.stem
+    suffix, compression = _formats(path)
+    if suffix not in FORMATS:
+        raise GridcostError(f"{path}: unknown mesh format {suffix or '(no extension)'!r}; "
+                            f"known: {', '.join(sorted(FORMATS))} (optionally .gz or .xz)")
+    name = name or (Path(path.stem).stem if compression else path.stem)
     digest = _sha256(path)
     cfile = cache_dir() / f"{digest[:32]}-v{CACHE_VERSION}.npz"
     if use_cache and cfile.exists():
@@ -213,7 +276,7 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     report = {"faces_loaded": int(len(mesh.faces)), "faces_dropped": 0, "strips_decoded": 0}
     faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
-        strips = _ply_strips(mesh) if path.suffix.lower() == ".ply" else None
+        strips = _ply_strips(mesh) if suffix == ".ply" else None
         if strips:
             faces = _decode_strips(strips)
             report["strips_decoded"] = len(strips)
@@ -246,8 +309,8 @@ def _atomic_savez(path: Path, **arrays) -> None:
         pass
 
 
-# ---------------------------------------------------------------- registry
-#: short names for the MANIFEST meshes whose file stem is not a good name
+# ---------------------------------------------------------------- named scenes
+#: short names of the meshes (the registry's names; kept for code that maps MANIFEST files to names)
 ALIASES = {
     "stanford/bun_zipper_res4.ply": "bunny-948",
     "stanford/bun_zipper_res3.ply": "bunny-3851",
@@ -264,18 +327,43 @@ ALIASES = {
 }
 
 
-def manifest(models: Path | None = None) -> dict[str, dict]:
-    """Short name -> MANIFEST row (with ``path``) for every mesh listed in ``MANIFEST.tsv``."""
-    models = models or models_dir()
-    mf = models / "MANIFEST.tsv"
-    if not mf.exists():
+def _short_name(rel: str) -> str:
+    from tracer import registry
+    return (registry.BY_FILE.get(rel) or ALIASES.get(rel)
+            or re.sub(r"[^a-z0-9]+", "-", Path(rel).stem.lower()).strip("-"))
+
+
+def _read_manifest(models: Path) -> dict[str, dict]:
+    mf = Path(models) / "MANIFEST.tsv"
+    if not mf.is_file():
         return {}
     out = {}
     with open(mf, newline="") as f:
         for row in csv.DictReader(f, delimiter="\t"):
             rel = row["file"]
-            name = ALIASES.get(rel) or re.sub(r"[^a-z0-9]+", "-", Path(rel).stem.lower()).strip("-")
-            out[name] = dict(row, path=str(models / rel))
+            out[_short_name(rel)] = dict(row, path=str(Path(models) / rel))
+    return out
+
+
+def manifest(models: Path | None = None) -> dict[str, dict]:
+    """Short name -> MANIFEST row (columns of ``MANIFEST.tsv``, with ``path``) for every named mesh.
+
+    Without ``models``: every mesh of the registry (``path``: the first file the lookup would use, not
+    yet verified, or None when the mesh is missing; ``found``: its lookup step), plus meshes listed in
+    the ``MANIFEST.tsv`` of ``$GRIDCOST_MODELS`` or ``../shared/models`` that the registry lacks. With
+    ``models``: the rows of that directory's ``MANIFEST.tsv`` only."""
+    if models is not None:
+        return _read_manifest(Path(models))
+    from tracer import registry
+    out = {}
+    for name, mesh in registry.MESHES.items():
+        cands = registry.candidates(name)
+        out[name] = dict(mesh.row(), path=str(cands[0][1]) if cands else None,
+                         found=cands[0][0] if cands else None)
+    for d in (registry.env_models_dir(), registry.shared_models_dir()):
+        if d is not None:
+            for name, row in _read_manifest(d).items():
+                out.setdefault(name, dict(row, found="models" if d == registry.env_models_dir() else "shared"))
     return out
 
 
@@ -285,16 +373,25 @@ def scene_names() -> list[str]:
 
 
 def load_scene(name_or_path: str) -> Scene:
-    """A named scene (MANIFEST short name or procedural, e.g. ``cylinder-3996``) or a mesh path."""
-    from tracer import procedural
+    """A named scene (registry short name, a MANIFEST name, or procedural, e.g. ``cylinder-3996``) or a
+    mesh path. A registry mesh found nowhere is replaced by a labelled stand-in (see
+    :func:`tracer.registry.load`; ``GRIDCOST_NO_STAND_INS=1`` makes that an error)."""
+    from tracer import procedural, registry
     spec = str(name_or_path)
     if procedural.matches(spec):
         return procedural.make(spec)
+    if spec in registry.MESHES:
+        return registry.load(spec)
     mf = manifest()
-    if spec in mf:
-        return load_mesh(mf[spec]["path"], name=spec)
+    if spec in mf and mf[spec].get("path"):
+        row = mf[spec]
+        path = Path(row["path"])
+        if row.get("sha256") and path.is_file():
+            got = registry.content_sha256(path)
+            if got != row["sha256"]:
+                raise GridcostError(f"{path}: sha256 {got} does not match its MANIFEST.tsv's {row['sha256']} "
+                                    f"for {spec}")
+        return load_mesh(path, name=spec)
     if Path(spec).suffix or os.sep in spec:
         return load_mesh(spec)
-    where = models_dir()
-    hint = "" if mf else f" (no MANIFEST.tsv under {where}; set --models or GRIDCOST_MODELS)"
-    raise GridcostError(f"unknown scene {spec!r}{hint}; known: {', '.join(scene_names())}")
+    raise GridcostError(f"unknown scene {spec!r}; known: {', '.join(scene_names())}")
