@@ -16,6 +16,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar, nnls
 
 from costmodel.derive import long_skinny_time, one_level_time
+from tracer.constants import IZE_TI_OVER_TS
 
 N_BOOT = 400
 
@@ -29,11 +30,13 @@ def _design_one_level(M, N, form, setup=True):
 
 
 def _metrics(y, yhat) -> dict:
+    """R², mean and maximum absolute percentage error of ``yhat`` against ``y`` (shared by every fit)."""
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)
     ss_res = float(((y - yhat) ** 2).sum())
     ss_tot = float(((y - y.mean()) ** 2).sum())
+    ape = np.abs(yhat - y) / np.abs(y)
     return {"r2": 1 - ss_res / ss_tot if ss_tot > 0 else float("nan"),
-            "mape": float(np.mean(np.abs(yhat - y) / np.abs(y))) * 100}
+            "mape": float(np.mean(ape)) * 100, "max_ape": float(np.max(ape)) * 100}
 
 
 def _ci(samples, level=0.95):
@@ -184,7 +187,7 @@ class ExponentFit:
         return np.exp(self.log_c_) * np.asarray(x, float) ** self.alpha_
 
 
-def work_cost(steps, tests, ti_over_ts: float = 4.0):
+def work_cost(steps, tests, ti_over_ts: float = IZE_TI_OVER_TS):
     """Ize's cost in units of Ts from the tracer's counters: steps + (Ti/Ts) tests. Deterministic
     (no timing noise), so exponents of its optimum test the theory's counting argument alone."""
     return np.asarray(steps, float) + ti_over_ts * np.asarray(tests, float)

@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
+from costmodel.fit import _metrics
+
 #: per-ray work columns the model takes, in order (``ray`` is the optional constant per-ray term)
 COLUMNS = ("packets", "slices", "cells", "tests")
 CONSTANTS = ("t_setup", "t_slice", "t_cell", "t_test")
@@ -45,13 +47,6 @@ def design(X, ray_term: bool = False) -> np.ndarray:
     if ray_term:
         A = np.column_stack([A, np.ones(len(A))])
     return A
-
-
-def _metrics(y, yhat) -> dict:
-    ss_res = float(((y - yhat) ** 2).sum())
-    ss_tot = float(((y - y.mean()) ** 2).sum())
-    return {"r2": 1 - ss_res / ss_tot if ss_tot > 0 else float("nan"),
-            "mape": float(np.mean(np.abs(yhat - y) / np.abs(y))) * 100, "max_ape": float(np.max(np.abs(yhat - y) / np.abs(y))) * 100}
 
 
 class PacketCostFit:
