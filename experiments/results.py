@@ -49,7 +49,25 @@ def write_csv(path, df: pd.DataFrame) -> Path:
         vals = LEDGER.column_values()
         for c in missing:
             df[c] = vals[c]
+    from tracer.registry import STAND_INS
+    if "scene" in df.columns and "stand_in" not in df.columns:  # a mesh replaced by a stand-in is marked
+        df = df.copy()
+        df["stand_in"] = df.scene.map(lambda s: STAND_INS.get(s, "")).fillna("")
     return atomic_write(path, df.to_csv(index=False))
+
+
+def mark_stand_ins(summary_path) -> None:
+    """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
+    from tracer.registry import STAND_INS
+    path = Path(summary_path)
+    if not STAND_INS or not path.exists():
+        return
+    text = path.read_text()
+    used = {k: v for k, v in STAND_INS.items() if k in text}
+    if not used or "## Stand-ins" in text:
+        return
+    atomic_write(path, text.rstrip("\n") + "\n\n## Stand-ins\n\n**These rows are not the real meshes:**\n\n"
+                 + "".join(f"- `{k}`: {v}\n" for k, v in sorted(used.items())))
 
 
 def _jsonable(x):

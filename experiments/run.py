@@ -49,7 +49,8 @@ ALL_ORDER = ["derive", "table2", "predict", "table3", "table4", "fig2", "fig5", 
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models", default=None,
-                   help="models directory (default: $GRIDCOST_MODELS or ../shared/models)")
+                   help="models directory searched first (default: $GRIDCOST_MODELS; then ../shared/models, the "
+                        "meshes shipped in tracer/data, the user cache, a download; `models` lists them)")
     p.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
     p.add_argument("--out", default="results", help="results directory (default: results)")
@@ -99,9 +100,12 @@ def _refuse_dirty(args) -> None:
 
 
 def _run_target(name: str, args) -> int:
-    from experiments.results import start_target
+    from pathlib import Path
+
+    from experiments.results import mark_stand_ins, start_target
     start_target()
     rc = importlib.import_module(TARGETS[name][0]).main(args)
+    mark_stand_ins(Path(args.out) / name / "summary.md")
     if name != "verify":
         _index(args.out)
     return rc

@@ -616,6 +616,7 @@ def stand_in(name: str, reason: str | None = None):
               "lookup": "stand-in"}
     report.update(validate(tris, f"stand-in for {name}"))
     scene = Scene(tris, name, f"stand-in: {recipe} (for {name}, {mesh.faces:,} faces, not found)", report)
+    STAND_INS[name] = stand_in_note(scene)
     if name not in _ANNOUNCED:
         _ANNOUNCED.add(name)
         if _NETWORK_DOWN:
@@ -632,6 +633,10 @@ def how_to_get(mesh: Mesh) -> str:
     src = mesh.sources[0] if mesh.sources else Source(mesh.urls[0] if mesh.urls else "")
     what = f"extract {src.member} from {src.url}" if src.member else f"download {src.url}"
     return f"{what} into $GRIDCOST_MODELS/{Path(mesh.file).parent.as_posix()}/ (a .gz or .xz of it works too)"
+
+
+#: scene name -> note of every stand-in built or loaded in this process (experiment outputs mark them)
+STAND_INS: dict[str, str] = {}
 
 
 def stand_in_note(scene) -> str | None:
