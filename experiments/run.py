@@ -17,28 +17,28 @@ import sys
 
 # name -> (module, one-line help). Order is the dependency order used by `all`.
 TARGETS: dict[str, tuple[str, str]] = {
-    "verify": ("experiments.verify", "trace with a structure and the float64 oracle; count disagreements"),
-    "bench": ("experiments.bench", "build time and Mrays/s of every structure beside Embree and trimesh"),
-    "derive": ("experiments.ize_derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
-    "table2": ("experiments.ize_table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
-    "fit": ("experiments.ize_fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
-    "table4": ("experiments.ize_table4", "Ize Table 4: two-level grids, M1 = (8N)^0.6, M2 = 8N2 vs swept M1"),
-    "fig2": ("experiments.ize_fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
-    "fig5": ("experiments.ize_fig5", "Ize Fig 5: two-level (m1, m2) factor plane, %% over best, theory point"),
-    "wald-table1": ("experiments.wald_table1", "Wald 2006 Table 1: triangle tests with/without mailboxing and frustum culling"),
-    "wald-table4": ("experiments.wald_table4", "Wald 2006 Table 4: cells visited and tests, single ray vs 4x4 vs 8x8"),
-    "wald-fig6": ("experiments.wald_fig6", "Wald 2006 Fig 6: render time against the grid resolution factor lambda"),
-    "wald-fig7": ("experiments.wald_fig7", "Wald 2006 Fig 7: time against packet size for several model resolutions"),
-    "fournier-table1": ("experiments.fournier_table1", "Fournier & Poulin 1993 Table 1: sorted lists vs a 30^3 grid"),
-    "table1h": ("experiments.hapala_table1", "Hapala 2011 Table 1: grid vs kd-tree build/trace times and R_C per scene"),
-    "fig1h": ("experiments.hapala_figs", "Hapala 2011 Fig 1: R_C estimate error against calibration scenes, random rays"),
-    "fig2h": ("experiments.hapala_figs", "Hapala 2011 Fig 2: R_C estimate error against calibration scenes, path rays"),
-    "selector": ("experiments.hapala_selector", "grid or kd-tree for a scene and a ray budget: the decision and its estimate"),
-    "havran": ("experiments.hapala_havran", "Havran scene statistics from the grid (sparseness, maxRefs, moments)"),
-    "exponents": ("experiments.ize_exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
-    "predict": ("experiments.ize_predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
-    "table3": ("experiments.ize_table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
-    "models": ("experiments.models", "every named scene: faces, where it was found or how to get it, licence"),
+    "verify": ("experiments.tools.verify", "trace with a structure and the float64 oracle; count disagreements"),
+    "bench": ("experiments.tools.bench", "build time and Mrays/s of every structure beside Embree and trimesh"),
+    "derive": ("experiments.ize.derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
+    "table2": ("experiments.ize.table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
+    "fit": ("experiments.ize.fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
+    "table4": ("experiments.ize.table4", "Ize Table 4: two-level grids, M1 = (8N)^0.6, M2 = 8N2 vs swept M1"),
+    "fig2": ("experiments.ize.fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
+    "fig5": ("experiments.ize.fig5", "Ize Fig 5: two-level (m1, m2) factor plane, %% over best, theory point"),
+    "wald-table1": ("experiments.wald.table1", "Wald 2006 Table 1: triangle tests with/without mailboxing and frustum culling"),
+    "wald-table4": ("experiments.wald.table4", "Wald 2006 Table 4: cells visited and tests, single ray vs 4x4 vs 8x8"),
+    "wald-fig6": ("experiments.wald.fig6", "Wald 2006 Fig 6: render time against the grid resolution factor lambda"),
+    "wald-fig7": ("experiments.wald.fig7", "Wald 2006 Fig 7: time against packet size for several model resolutions"),
+    "fournier-table1": ("experiments.fournier.table1", "Fournier & Poulin 1993 Table 1: sorted lists vs a 30^3 grid"),
+    "table1h": ("experiments.hapala.table1", "Hapala 2011 Table 1: grid vs kd-tree build/trace times and R_C per scene"),
+    "fig1h": ("experiments.hapala.figs", "Hapala 2011 Fig 1: R_C estimate error against calibration scenes, random rays"),
+    "fig2h": ("experiments.hapala.figs", "Hapala 2011 Fig 2: R_C estimate error against calibration scenes, path rays"),
+    "selector": ("experiments.hapala.selector", "grid or kd-tree for a scene and a ray budget: the decision and its estimate"),
+    "havran": ("experiments.hapala.havran", "Havran scene statistics from the grid (sparseness, maxRefs, moments)"),
+    "exponents": ("experiments.ize.exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
+    "predict": ("experiments.ize.predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
+    "table3": ("experiments.ize.table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
+    "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 
 #: targets that `all` runs, in order
@@ -77,21 +77,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _index(out) -> None:
-    from pathlib import Path
-
-    from experiments.results import write_index
-    if Path(out).is_dir():
-        write_index(out)
-
-
-def _refuse_dirty(args) -> None:
+def _refuse_dirty(ctx, args) -> None:
     """``all`` into the default results/ must come from a clean commit (or say it did not)."""
-    from pathlib import Path
-
-    from experiments.results import REPO, git_commit
+    from experiments.core.store import REPO, git_commit
     from tracer.errors import GridcostError
-    if Path(args.out).resolve() != (REPO / "results").resolve():
+    if ctx.out.resolve() != (REPO / "results").resolve():
         return
     commit = git_commit()
     if commit.endswith("-dirty") and not args.allow_dirty:
@@ -99,15 +89,14 @@ def _refuse_dirty(args) -> None:
                             f"committed results/, or pass --allow-dirty (recorded in every meta.json)")
 
 
-def _run_target(name: str, args) -> int:
-    from pathlib import Path
-
-    from experiments.results import mark_stand_ins, start_target
-    start_target()
-    rc = importlib.import_module(TARGETS[name][0]).main(args)
-    mark_stand_ins(Path(args.out) / name / "summary.md")
-    if name != "verify":
-        _index(args.out)
+def _run_target(name: str, ctx, args) -> int:
+    """One target with a fresh ledger; its summary marks stand-ins; the results index is rewritten."""
+    from experiments.core.store import write_index
+    ctx.start_target()
+    rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
+    ctx.mark_stand_ins(ctx.out / name / "summary.md")
+    if name != "verify" and ctx.out.is_dir():
+        write_index(ctx.out, ctx.fig_dir)
     return rc
 
 
@@ -132,39 +121,38 @@ def _failure(name: str, exc: BaseException, debug: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Parse the command line, build the one :class:`RunContext`, run the target (or all)."""
     args = build_parser().parse_args(argv)
     if args.models:
         os.environ["GRIDCOST_MODELS"] = args.models
+    ctx = None
     try:
         if args.threads:
             from tracer.timing import set_threads
             set_threads(args.threads)
-        from experiments.results import set_output
-        from experiments.sweep import set_quick
-        set_output(args.out)
-        set_quick(getattr(args, "quick", False))
-        if args.dask:
-            from experiments.executor import set_executor
-            set_executor(args.dask)
+        from experiments.core.context import RunContext
+        ctx = RunContext.from_args(args)
         if args.target != "all":
-            return _run_target(args.target, args)
-        _refuse_dirty(args)
+            return _run_target(args.target, ctx, args)
+        _refuse_dirty(ctx, args)
+        failed = {}
+        for name in ALL_ORDER:
+            try:
+                rc = _run_target(name, ctx, _sub_args(name, args))
+                if rc:
+                    failed[name] = rc
+            except Exception as exc:
+                failed[name] = _failure(name, exc, args.debug)
+        if failed:
+            print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
+                  + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
+            return max(failed.values())
+        return 0
     except Exception as exc:
         return _failure(args.target, exc, args.debug)
-    failed = {}
-    for name in ALL_ORDER:
-        try:
-            rc = _run_target(name, _sub_args(name, args))
-            if rc:
-                failed[name] = rc
-        except Exception as exc:
-            failed[name] = _failure(name, exc, args.debug)
-    _index(args.out)
-    if failed:
-        print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
-              + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
-        return max(failed.values())
-    return 0
+    finally:
+        if ctx is not None:
+            ctx.close()
 
 
 def cli() -> None:

@@ -117,7 +117,7 @@ def test_compact_manifold_exponent_is_sublinear():
 def test_two_level_m1_exponent_is_three_fifths():
     """Ize Eq 13: the top level of a two-level grid grows as M1 ∝ N^(3/5), on the tracer's own
     counters (points on a surface, six sizes, 17 M1 values each; measured 0.63-0.65 over ray seeds)."""
-    from experiments.ize_exponents import TWO_LEVEL_FAMILY, two_level_best_m1
+    from experiments.ize.exponents import TWO_LEVEL_FAMILY, two_level_best_m1
     Ns, Mb = [], []
     for name in TWO_LEVEL_FAMILY:
         s = load_scene(name)

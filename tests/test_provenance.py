@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiments.results import LEDGER, PointStore, start_target, write_csv
+from experiments.core.context import RunContext
+from experiments.core.store import PointStore
 from tracer import build, load_scene
 from tracer.errors import GridcostError
 
@@ -100,8 +101,8 @@ def test_point_with_another_key_is_remeasured(tmp_path, monkeypatch):
 
 def test_code_in_key_invalidates(tmp_path):
     """The key covers the experiment code that shapes a point, beside tracer/."""
-    a = PointStore(tmp_path, code=("experiments/sweep.py",))
-    b = PointStore(tmp_path, code=("experiments/sweep.py", "experiments/memprobe.py"))
+    a = PointStore(tmp_path, code=("experiments/core/sweep.py",))
+    b = PointStore(tmp_path, code=("experiments/core/sweep.py", "experiments/ize/memprobe.py"))
     assert a.measurement_key["code"] != b.measurement_key["code"]
     a.put({"p": 2}, {"v": 1})
     assert b.get({"p": 2}) is None
@@ -115,12 +116,12 @@ def test_legacy_point_without_key_is_remeasured(tmp_path):
 
 def test_rows_carry_commit_host_clock(tmp_path):
     import pandas as pd
-    start_target()
-    store = PointStore(tmp_path)
-    store.put({"p": 4}, {"v": 1})
-    write_csv(tmp_path / "x.csv", pd.DataFrame([{"a": 1}]))
+    ctx = RunContext(out=tmp_path)
+    ctx.start_target()
+    ctx.store().put({"p": 4}, {"v": 1})
+    ctx.write_csv(tmp_path / "x.csv", pd.DataFrame([{"a": 1}]))
     df = pd.read_csv(tmp_path / "x.csv")
-    now = LEDGER.now()
+    now = ctx.ledger.now()
     assert df.commit[0] == now["commit"] and df.host[0] == now["host"] and df.clock[0] == now["clock"]
 
 
@@ -196,9 +197,9 @@ def test_grid_near_the_budget(monkeypatch):
 # ---------------------------------------------------------------- loud failures
 def test_internal_error_is_one_line_exit_1(monkeypatch, capsys):
     from experiments import run
-    from experiments import ize_derive
+    from experiments.ize import derive as ize_derive
 
-    def boom(args):
+    def boom(ctx, args):
         raise RuntimeError("kaboom\nsecond line")
     monkeypatch.setattr(ize_derive, "main", boom)
     assert run.main(["derive", "--out", "/tmp/gridcost-test-derive"]) == 1
@@ -213,7 +214,7 @@ def test_all_goes_on_lists_failures_and_exits_nonzero(monkeypatch, capsys, tmp_p
     ran = []
     monkeypatch.setattr(run, "ALL_ORDER", ["derive", "fig2"])
 
-    def fake(name, args):
+    def fake(name, ctx, args):
         ran.append(name)
         if name == "derive":
             raise GridcostError("bad input")
@@ -225,14 +226,15 @@ def test_all_goes_on_lists_failures_and_exits_nonzero(monkeypatch, capsys, tmp_p
 
 
 def test_all_refuses_dirty_tree_into_results(monkeypatch, capsys):
-    from experiments import results, run
-    monkeypatch.setattr(results, "git_commit", lambda: "abc1234-dirty")
+    from experiments import run
+    from experiments.core import store
+    monkeypatch.setattr(store, "git_commit", lambda: "abc1234-dirty")
     assert run.main(["all"]) == 2
     assert "uncommitted changes" in capsys.readouterr().err
 
 
 def test_bench_threads_ratio_is_labelled_per_thread(tmp_path):
-    from experiments.bench import run_bench
+    from experiments.tools.bench import run_bench
     from tracer.reference import EmbreeAccel
     if not EmbreeAccel.available():
         pytest.skip("embreex not installed (optional extra)")

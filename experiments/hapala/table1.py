@@ -18,7 +18,8 @@ import pandas as pd
 
 from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
                               time_stats)
-from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_json, write_meta
+from experiments.core.store import atomic_write, write_json
+from experiments.core.common import progress
 from tracer.timing import set_threads
 
 KINDS = ("random", "path")
@@ -208,15 +209,14 @@ def settings(args) -> dict:
 
 
 #: the code (beside tracer/) that shapes a stored calibration point
-MEASURE_CODE = ("experiments/hapala_table1.py", "costmodel/select.py")
+MEASURE_CODE = ("experiments/hapala/table1.py", "costmodel/select.py")
 
 
-def measure_all(names, cfg: dict, out, force: bool = False, log=print, repeat_pass: int = 1,
-                reuse_stale: bool = False) -> list[dict]:
+def measure_all(ctx, names, cfg: dict, log=print, repeat_pass: int = 1) -> list[dict]:
     """Calibrate every scene (resumable: one stored point per scene and settings, keyed by the
-    measurement key of :class:`experiments.results.PointStore`); ``repeat_pass`` > 1 measures the
+    measurement key of :class:`experiments.core.store.PointStore`); ``repeat_pass`` > 1 measures the
     same again as an independent retest."""
-    store = PointStore(out, force=force, code=MEASURE_CODE, reuse_stale=reuse_stale)
+    store = ctx.store(code=MEASURE_CODE)
     raw = []
     for i, name in enumerate(progress(names, "table1h calibration", quiet=log is not print)):
         key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "protocol": PROTOCOL, **cfg}
@@ -378,7 +378,7 @@ def summary(tab: pd.DataFrame, cfg: dict, threads: int, hier_note: str, notes=()
     return "\n".join(lines) + "\n"
 
 
-def figure(tab: pd.DataFrame) -> None:
+def figure(ctx, tab: pd.DataFrame) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -402,49 +402,48 @@ def figure(tab: pd.DataFrame) -> None:
         ax.set(xlabel="N (triangles)", ylabel="t_R^G / t_R^H", title=f"{kind} rays (labels: R_C; <1: grid wins)")
         ax.set_yscale("log")
         ax.legend(fontsize=6)
-    finish_figure(fig, "table1h")
+    ctx.finish_figure(fig, "table1h")
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     cfg = settings(args)
     names = args.scenes.split(",") if args.scenes else default_scenes(args.quick)
-    raw = measure_all(names, cfg, args.out, force=args.force, log=log, reuse_stale=args.reuse_stale)
+    raw = measure_all(ctx, names, cfg, log=log)
     out_dir = Path(args.out) / "table1h"
     write_json(out_dir / "raw.json", raw)
     cal = pd.concat([records(raw, hier=h) for h in cfg["hiers"]], ignore_index=True)
-    write_csv(out_dir / "calibration.csv", cal)
+    ctx.write_csv(out_dir / "calibration.csv", cal)
     tab = table(raw)
-    write_csv(out_dir / "table1h.csv", tab)
+    ctx.write_csv(out_dir / "table1h.csv", tab)
     bvh = table(raw, hier="bvh")
     nb = {k: int(np.isfinite(bvh[f"R_C_{k}"]).sum()) for k in KINDS}
     note = (f"With the BVH (tracer.bvh, binned SAH) as the hierarchy instead, the hierarchy pays off in "
             f"{nb['random']} (random) / {nb['path']} (path) of {len(bvh)} scenes (calibration.csv, hier = bvh).")
     md = summary(tab, cfg, threads, note, notes=[stadium_note(raw, tab)])
     if getattr(args, "retest", False):
-        raw2 = measure_all(names, cfg, args.out, force=args.force, log=log, repeat_pass=2,
-                           reuse_stale=args.reuse_stale)
+        raw2 = measure_all(ctx, names, cfg, log=log, repeat_pass=2)
         write_json(out_dir / "raw_retest.json", raw2)
         rt = retest(raw, raw2)
-        write_csv(out_dir / "retest.csv", rt)
+        ctx.write_csv(out_dir / "retest.csv", rt)
         md += retest_summary(rt)
     atomic_write(out_dir / "summary.md", md)
-    figure(tab)
-    write_meta(out_dir, "table1h", started, threads=threads, scenes=names, quick=bool(args.quick), **cfg)
+    figure(ctx, tab)
+    ctx.write_meta(out_dir, "table1h", started, threads=threads, scenes=names, quick=bool(args.quick), **cfg)
     log(md)
     return {"table": tab, "raw": raw}
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     if args.json:
         import json
         import sys
-        res = run(args, log=lambda *a: None)
+        res = run(ctx, args, log=lambda *a: None)
         tab = res["table"]
         json.dump({"scenes": len(tab), **{f"grid_wins_{k}": int(np.isinf(tab[f"R_C_{k}"]).sum()) for k in KINDS},
                    **{f"kdtree_wins_{k}": int(np.isfinite(tab[f"R_C_{k}"]).sum()) for k in KINDS}}, sys.stdout)
         sys.stdout.write("\n")
         return 0
-    run(args)
+    run(ctx, args)
     return 0

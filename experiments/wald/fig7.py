@@ -13,12 +13,12 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_meta
-from experiments.wald_fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.common import progress
+from experiments.wald.fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
 from tracer.scene import load_scene
 from tracer.timing import set_threads
 
@@ -50,7 +50,7 @@ def crossover(best: pd.DataFrame, col: str):
     return pd.DataFrame(out)
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
@@ -58,7 +58,7 @@ def run(args, log=print) -> dict:
     side = args.side or (128 if quick else 512)
     repeats = args.repeats or 5
     out_dir = Path(args.out) / "wald-fig7"
-    store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
+    store = ctx.store(code=("experiments/wald/fig6.py",))
     rows = []
     for name in progress(names, "wald-fig7", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
@@ -72,13 +72,13 @@ def run(args, log=print) -> dict:
     cross = crossover(best, "measured_best_packet")
     cross_pred = crossover(best, "predicted_best_packet")
     fit = pooled_fit(df)
-    write_csv(out_dir / "fig7.csv", df)
-    write_csv(out_dir / "best.csv", best)
-    write_csv(out_dir / "crossover.csv", pd.concat([cross.assign(source="measured"), cross_pred.assign(source="cost model")]))
+    ctx.write_csv(out_dir / "fig7.csv", df)
+    ctx.write_csv(out_dir / "best.csv", best)
+    ctx.write_csv(out_dir / "crossover.csv", pd.concat([cross.assign(source="measured"), cross_pred.assign(source="cost model")]))
     md = _summary(df, best, cross, cross_pred, fit, side, repeats, threads, args.lam)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df)
-    write_meta(out_dir, "wald-fig7", started, threads=threads, side=side, repeats=repeats, scenes=names,
+    _figure(ctx, df)
+    ctx.write_meta(out_dir, "wald-fig7", started, threads=threads, side=side, repeats=repeats, scenes=names,
                packets=list(PACKETS), lam=args.lam, quick=quick)
     log(md)
     return {"table": df, "best": best}
@@ -117,7 +117,7 @@ def _summary(df, best, cross, cross_pred, fit, side, repeats, threads, lam) -> s
     return "\n".join(lines) + "\n"
 
 
-def _figure(df):
+def _figure(ctx, df):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -139,9 +139,9 @@ def _figure(df):
     for ax in axes:
         ax.legend(fontsize=6)
         ax.tick_params(labelsize=7)
-    finish_figure(fig, "wald-fig7")
+    ctx.finish_figure(fig, "wald-fig7")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

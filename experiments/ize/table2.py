@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments.common import scene_list
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
-from experiments.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
 from tracer.constants import IZE_TI_OVER_TS
 from tracer.rays import make_rays
@@ -43,7 +43,7 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)  # one pinned thread: per-ray costs without scheduling noise
     quick = args.quick
@@ -52,7 +52,7 @@ def run(args, log=print) -> dict:
     repeats = args.repeats or (5 if not quick else 3)
     factors = QUICK_FACTORS if quick else FULL_FACTORS
     out_dir = Path(args.out) / "table2"
-    store = PointStore.for_args(args)  # one point store shared by all targets
+    store = ctx.store()  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
 
     rows, scenes, rays = [], {}, {}
@@ -130,17 +130,17 @@ def run(args, log=print) -> dict:
     tab = pd.DataFrame(table)
     fit_df = pd.DataFrame(fits)
 
-    write_csv(out_dir / "table2.csv", df)
-    write_csv(out_dir / "table2_summary.csv", tab)
-    write_csv(out_dir / "fits.csv", fit_df)
+    ctx.write_csv(out_dir / "table2.csv", df)
+    ctx.write_csv(out_dir / "table2_summary.csv", tab)
+    ctx.write_csv(out_dir / "fits.csv", fit_df)
     summary = _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, args.seed, pool)
     if not ratio_ok:
         summary = summary.replace("## Reading", "**Warning:** the pooled fit was degenerate (Ts or Ti at 0): the timings "
                                   "of this run are too noisy to fit, and the 'fitted' column uses the paper's Ti/Ts = 4.\n\n"
                                   "## Reading")
     atomic_write(out_dir / "summary.md", summary)
-    _figure(df, fit_df, scenes, ratio)
-    write_meta(out_dir, "table2", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
+    _figure(ctx, df, fit_df, scenes, ratio)
+    ctx.write_meta(out_dir, "table2", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
                ray_kinds=list(KINDS), sweep_factors=factors, scenes=names, quick=quick,
                fitted_ti_over_ts=ratio, fitted_ts_ns=cfit.ts_, fitted_ti_ns=cfit.ti_,
                fitted_ci=cfit.ci_, fit_cond=cfit.cond_)
@@ -247,7 +247,7 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
     return "\n".join(lines) + "\n"
 
 
-def _figure(df, fit_df, scenes, ratio):
+def _figure(ctx, df, fit_df, scenes, ratio):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -268,11 +268,11 @@ def _figure(df, fit_df, scenes, ratio):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)")
     axes[0][-1].legend(fontsize=6)
-    finish_figure(fig, "table2")
+    ctx.finish_figure(fig, "table2")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     if args.json:
         import json
         import sys

@@ -1,80 +1,17 @@
 """Sweep points: build a structure at given parameters once, trace every ray set on it, one row per
-(point, ray kind). Rows are stored as soon as measured (:class:`experiments.results.PointStore`)."""
+(point, ray kind). Rows are stored as soon as measured (:class:`experiments.core.store.PointStore`)."""
 from __future__ import annotations
-
-import socket
 
 import numpy as np
 from tqdm import tqdm
 
-from experiments.results import PointStore
+from experiments.core.executor import LocalExecutor
+from experiments.core.point import QUICK_MIN_SAMPLE, REFERENCE
+from experiments.core.store import PointStore
 from tracer.accel import build
-from tracer.timing import MIN_SAMPLE_SECONDS, clock_name, time_paired
 
 QUICK_FACTORS = [2.0**k for k in range(-3, 7)]              # N/8 ... 64N, 10 points
 FULL_FACTORS = [2.0 ** (k / 2) for k in range(-6, 13)]      # N/8 ... 64N, 19 points
-
-
-#: the drift meter every sweep point is timed beside: a one-level grid of 8N cells on the same scene
-REFERENCE = ("grid", {"factor": 8.0})
-_REF_CACHE: dict = {}
-
-
-def _reference(scene):
-    """The scene's reference structure (built once per process)."""
-    key = (scene.name, scene.n)
-    if key not in _REF_CACHE:
-        _REF_CACHE.clear()  # one scene at a time: large references are not kept around
-        _REF_CACHE[key] = build(scene, REFERENCE[0], **REFERENCE[1])
-    return _REF_CACHE[key]
-
-
-#: --quick runs (CI, first contact) take shorter timing samples than MIN_SAMPLE_SECONDS
-QUICK_MIN_SAMPLE = 0.005
-_QUICK = False
-
-
-def set_quick(quick: bool) -> None:
-    """Sweeps of a --quick run time shorter samples (their points are stored under their own keys)."""
-    global _QUICK
-    _QUICK = bool(quick)
-
-
-def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: int = 5,
-            min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
-    """Build once; for each ray kind time the point and the scene's reference structure
-    (:data:`REFERENCE`) side by side in ``repeats`` interleaved rounds (after a warm-up), and count
-    work. Rows carry the point's own median (``seconds_raw``) and its median per-round ratio to the
-    reference (``ratio_to_ref``): the ratio does not drift with the machine, which on a shared VM
-    changes speed by 10-30 % between points timed minutes apart (:func:`sweep` turns it back into
-    seconds)."""
-    import numba
-    accel = build(scene, structure, **params)
-    ref = _reference(scene)
-    st = accel.stats()
-    rows = []
-    for kind, r in rays_by_kind.items():
-        tp = time_paired({"p": lambda: accel.intersect(r.origins, r.directions, counters=False),
-                          "r": lambda: ref.intersect(r.origins, r.directions, counters=False)},
-                         rounds=repeats, repeats=1, min_sample=min_sample)
-        p, q = np.asarray(tp["p"]), np.asarray(tp["r"])
-        med = float(np.median(p))
-        hits, cnt = accel.intersect(r.origins, r.directions, counters=True)
-        mean = cnt.mean()
-        rows.append({
-            "scene": scene.name, "N": scene.n, "structure": structure,
-            **{f"param_{k}": v for k, v in params.items()},
-            "cells": st.get("cells"), "M1": st.get("M1"), "res": "x".join(str(v) for v in st.get("res", [])) or None,
-            "refs": st.get("refs"), "memory_bytes": st.get("memory_bytes"), "build_s": st.get("build_s"),
-            "layout": st.get("layout"),
-            "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds_raw": med, "seconds_min": float(p.min()),
-            "spread": float((p.max() - p.min()) / med), "ref_seconds": float(np.median(q)),
-            "ratio_to_ref": float(np.median(p / q)), "clock": clock_name(), "ns_per_ray_raw": med / r.n * 1e9,
-            **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips")},
-            "hits": float((hits.tri_id[:2000] >= 0).mean()),
-            "threads": numba.get_num_threads(), "worker": socket.gethostname(),
-        })
-    return rows
 
 
 def _anchor(store: PointStore, scene, rays_by_kind: dict, rows: list[dict]) -> dict:
@@ -96,15 +33,16 @@ def _anchor(store: PointStore, scene, rays_by_kind: dict, rows: list[dict]) -> d
 
 def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, store: PointStore,
           repeats: int = 5, desc: str | None = None, extra_key: dict | None = None) -> list[dict]:
-    """Measure every parameter set not stored yet through the current executor (local or Dask),
-    storing each point as soon as it is measured; returns the rows of all points in order."""
-    from experiments.executor import get_executor, remember_scene
-    remember_scene(scene)
+    """Measure every parameter set not stored yet through the run's executor (local or Dask:
+    ``store.ctx.executor``), storing each point as soon as it is measured; returns the rows of all
+    points in order."""
+    ctx = store.ctx
+    quick = bool(ctx and ctx.quick)
     specs, keys = [], []
     for params in param_list:
         spec = {"scene": scene.name, "N": scene.n, "structure": structure, "params": params,
                 "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}, "repeats": repeats,
-                "timing": "beside-reference", **({"min_sample": QUICK_MIN_SAMPLE} if _QUICK else {}),
+                "timing": "beside-reference", **({"min_sample": QUICK_MIN_SAMPLE} if quick else {}),
                 **(extra_key or {})}
         keys.append(spec)
         if store.get(spec) is None:
@@ -113,7 +51,8 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
         bar = tqdm(total=len(specs), desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
                    disable=None, dynamic_ncols=True)
         mine = store.measurement_key
-        for spec, rows in get_executor().map(specs):
+        executor = ctx.executor if ctx is not None else LocalExecutor()
+        for spec, rows in executor.map(specs, scenes={scene.name: scene}):
             theirs = rows[0].pop("key") if rows else mine
             for r in rows[1:]:
                 r.pop("key", None)

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import time
 
-from experiments.common import add_scene_args, emit_json, parse_params, scene_from_args
-from experiments.results import progress
+from experiments.core.common import add_scene_args, emit_json, parse_params, scene_from_args
+from experiments.core.common import progress
 from tracer.accel import build
 from tracer.oracle import compare, oracle_cached
 from tracer.rays import KINDS, make_rays
@@ -39,7 +39,7 @@ def run_verify(scene, structure: str, params: dict, kinds, n_rays: int, seed: in
             **tot, "kinds": per_kind}
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     kinds = KINDS if args.kind == "all" else (args.kind,)
     if (args.scene and "," in args.scene) or "," in args.structure:  # one line each, a summary file
         rc = 0
@@ -65,7 +65,7 @@ def main(args) -> int:
 def _many(args, kinds, structure: str) -> int:
     from pathlib import Path
 
-    from experiments.results import atomic_write, write_json
+    from experiments.core.store import atomic_write, write_json
     from tracer.scene import load_scene
     outs = []
     for name in progress(args.scene.split(","), f"verify {args.structure}", quiet=getattr(args, "json", False)):

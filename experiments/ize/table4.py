@@ -10,10 +10,10 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import refine_minimum
-from experiments.ize_table2 import PAPER as PAPER2
-from experiments.common import scene_list
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
-from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
+from experiments.ize.table2 import PAPER as PAPER2
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -46,14 +46,14 @@ def m1_sweep(n: int, quick: bool) -> list[dict]:
     return [{"levels": 2, "m1": float(round(max(1.0, theory * 2.0 ** (k / 2)))), "m2_factor": 8.0} for k in ks]
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
     names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER2])
     n_rays = args.rays or (10_000 if quick else 100_000)
     repeats = args.repeats or (3 if quick else 5)
-    store = PointStore.for_args(args)
+    store = ctx.store()
     out_dir = Path(args.out) / "table4"
     rows, one_rows, table = [], [], []
     for name in names:
@@ -98,12 +98,12 @@ def run(args, log=print) -> dict:
         table.append(e)
     df = pd.concat(rows + one_rows, ignore_index=True)
     tab = pd.DataFrame(table)
-    write_csv(out_dir / "table4.csv", df)
-    write_csv(out_dir / "table4_summary.csv", tab)
+    ctx.write_csv(out_dir / "table4.csv", df)
+    ctx.write_csv(out_dir / "table4_summary.csv", tab)
     md = _summary(tab, n_rays, repeats, threads)
     atomic_write(out_dir / "summary.md", md)
-    _figure(pd.concat(rows, ignore_index=True), tab)
-    write_meta(out_dir, "table4", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
+    _figure(ctx, pd.concat(rows, ignore_index=True), tab)
+    ctx.write_meta(out_dir, "table4", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
                scenes=names, quick=quick)
     log(md)
     return {"table": tab}
@@ -141,7 +141,7 @@ def _summary(tab, n_rays, repeats, threads) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(df, tab):
+def _figure(ctx, df, tab):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -158,9 +158,9 @@ def _figure(df, tab):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)", fontsize=8)
     axes[0][-1].legend(fontsize=6)
-    finish_figure(fig, "table4")
+    ctx.finish_figure(fig, "table4")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

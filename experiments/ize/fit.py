@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum, select_model
-from experiments.common import add_scene_args, scene_from_args
-from experiments.results import PointStore, write_csv, write_json, write_meta
-from experiments.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, paired_penalties, penalty_pct,
+from experiments.core.common import add_scene_args, scene_from_args
+from experiments.core.store import write_json
+from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, paired_penalties, penalty_pct,
                                sweep)
 from tracer.rays import make_rays
 from tracer.timing import set_threads
@@ -32,7 +32,7 @@ def _ci(c):
     return f"[{c[0]:.3g}, {c[1]:.3g}]"
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     started = time.time()
     threads = set_threads(args.threads or 1)
     scene = scene_from_args(args)
@@ -40,7 +40,7 @@ def main(args) -> int:
     repeats = args.repeats or (3 if args.quick else 5)
     factors = QUICK_FACTORS if args.quick else FULL_FACTORS
     rays = {"random": make_rays(scene, "random", n_rays, seed=args.seed)}
-    store = PointStore.for_args(args)
+    store = ctx.store()
     rows = sweep(scene, "grid", grid_cells(scene, factors), rays, store, repeats, desc=f"fit {scene.name}")
     df = pd.DataFrame(rows)
     sel = select_model(df.cells.values, df.ns_per_ray.values, scene.n)
@@ -75,9 +75,9 @@ def main(args) -> int:
         "rays": n_rays, "threads": threads, "units": "ns per ray",
     }
     out_dir = Path(args.out) / "fit"
-    write_csv(out_dir / f"{scene.name}.csv", allrows)
+    ctx.write_csv(out_dir / f"{scene.name}.csv", allrows)
     write_json(out_dir / f"{scene.name}.json", out)
-    write_meta(out_dir, "fit", started, scene=scene.name, rays=n_rays, repeats=repeats, threads=threads)
+    ctx.write_meta(out_dir, "fit", started, scene=scene.name, rays=n_rays, repeats=repeats, threads=threads)
     if args.json:
         json.dump(out, sys.stdout, default=float)
         print()

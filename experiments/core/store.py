@@ -1,4 +1,5 @@
-"""Atomic, resumable result storage and the writers every target shares.
+"""Atomic, resumable result storage: files written atomically, the point store keyed by the
+measurement key, and the ledger of who measured the numbers a target writes.
 
 * Every file is written to a temporary file in the same directory and renamed into place, so a
   killed run never leaves a half-written file.
@@ -16,9 +17,8 @@ import time
 from importlib import metadata
 from pathlib import Path
 
-import pandas as pd
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def atomic_write(path, data: str | bytes) -> Path:
@@ -40,97 +40,11 @@ def write_json(path, obj) -> Path:
     return atomic_write(path, json.dumps(obj, indent=2, default=_jsonable) + "\n")
 
 
-def write_csv(path, df: pd.DataFrame) -> Path:
-    """Write ``df`` atomically; rows without provenance columns (``commit``, ``host``, ``clock``) get
-    the values behind this target's numbers (:data:`LEDGER`)."""
-    missing = [c for c in PROVENANCE_COLUMNS if c not in df.columns]
-    if missing:
-        df = df.copy()
-        vals = LEDGER.column_values()
-        for c in missing:
-            df[c] = vals[c]
-    from tracer.registry import STAND_INS
-    if "scene" in df.columns and "stand_in" not in df.columns:  # a mesh replaced by a stand-in is marked
-        df = df.copy()
-        df["stand_in"] = df.scene.map(lambda s: STAND_INS.get(s, "")).fillna("")
-    return atomic_write(path, df.to_csv(index=False))
-
-
-def mark_stand_ins(summary_path) -> None:
-    """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
-    from tracer.registry import STAND_INS
-    path = Path(summary_path)
-    if not STAND_INS or not path.exists():
-        return
-    text = path.read_text()
-    used = {k: v for k, v in STAND_INS.items() if k in text}
-    if not used or "## Stand-ins" in text:
-        return
-    atomic_write(path, text.rstrip("\n") + "\n\n## Stand-ins\n\n**These rows are not the real meshes:**\n\n"
-                 + "".join(f"- `{k}`: {v}\n" for k, v in sorted(used.items())))
-
-
 def _jsonable(x):
     try:
         return float(x)
     except (TypeError, ValueError):
         return str(x)
-
-
-#: where figures go: the repo's paper_figs/ for the default results directory, else <out>/paper_figs
-#: (so a run with ``--out /tmp/x`` never overwrites the committed figures); set by :func:`set_output`
-FIG_DIR: Path | None = None
-
-
-def set_output(out) -> Path:
-    """Point :func:`save_figure` at the figures directory that belongs to results directory ``out``."""
-    global FIG_DIR
-    out = Path(out).resolve()
-    FIG_DIR = REPO / "paper_figs" if out == (REPO / "results").resolve() else out / "paper_figs"
-    return FIG_DIR
-
-
-def save_figure(fig, name: str, out_dir=None) -> list[Path]:
-    """Save ``fig`` as <figures dir>/<name>.png and .pdf (atomically); see :func:`set_output`."""
-    import io
-    out_dir = Path(out_dir) if out_dir else (FIG_DIR or REPO / "paper_figs")
-    paths = []
-    for ext in ("png", "pdf"):
-        buf = io.BytesIO()
-        fig.savefig(buf, format=ext, dpi=150, bbox_inches="tight")
-        paths.append(atomic_write(out_dir / f"{name}.{ext}", buf.getvalue()))
-    return paths
-
-
-def progress(iterable, desc: str, total: int | None = None, quiet: bool = False, unit: str = "scene"):
-    """A tqdm progress bar with ETA over ``iterable`` on stderr; silent under ``--json`` (``quiet``)
-    and when stderr is not a terminal (or TQDM_DISABLE=1)."""
-    from tqdm import tqdm
-    disable = True if quiet or os.environ.get("TQDM_DISABLE") == "1" else None
-    return tqdm(iterable, desc=desc, total=total, unit=unit, leave=False, disable=disable, dynamic_ncols=True)
-
-
-def log_scale(ax, axis: str, values) -> bool:
-    """Put ``axis`` ("x" or "y") of ``ax`` on a log scale when ``values`` hold a positive finite
-    number; otherwise leave it linear and say on the panel that there is nothing to draw on a log
-    scale (a --quick run can produce such data; matplotlib would raise). Returns True when log."""
-    import numpy as np
-    v = np.asarray(values, dtype=float).ravel()
-    if (np.isfinite(v) & (v > 0)).any():
-        (ax.set_xscale if axis == "x" else ax.set_yscale)("log")
-        return True
-    ax.text(0.5, 0.5, "no positive values to draw on a log scale", transform=ax.transAxes, ha="center",
-            va="center", fontsize=8, color="gray")
-    return False
-
-
-def finish_figure(fig, name: str) -> list[Path]:
-    """Lay out ``fig``, save it (:func:`save_figure`) and close it."""
-    import matplotlib.pyplot as plt
-    fig.tight_layout()
-    paths = save_figure(fig, name)
-    plt.close(fig)
-    return paths
 
 
 def git_commit() -> str:
@@ -162,18 +76,20 @@ PROVENANCE_COLUMNS = ("commit", "host", "clock")
 
 class Ledger:
     """Who measured the numbers a target writes: the provenance of every stored point it served or
-    stored, and whether it timed anything itself in this run. :func:`start_target` resets it;
-    :func:`write_csv` and :func:`write_meta` read it."""
+    stored, and whether it timed anything itself in this run. The run context
+    (:class:`experiments.core.context.RunContext`) holds one, resets it before each target and reads
+    it when it writes a CSV or meta.json."""
 
     def __init__(self):
         self.reset()
 
     def reset(self) -> None:
+        from tracer.timing import timing_calls
         self.served: dict[tuple, int] = {}
         self.stale = 0
         self.reused = 0
         self.measured = 0
-        self._timing_calls0 = _timing_calls()
+        self._timing_calls0 = timing_calls()
         self._now: dict | None = None
 
     def now(self) -> dict:
@@ -190,7 +106,8 @@ class Ledger:
         self.stale += bool(stale)
 
     def timed_now(self) -> bool:
-        return _timing_calls() > self._timing_calls0
+        from tracer.timing import timing_calls
+        return timing_calls() > self._timing_calls0
 
     def sources(self) -> list[dict]:
         """Distinct (commit, host, clock) behind this target's numbers, with point counts."""
@@ -210,34 +127,6 @@ class Ledger:
         return {c: ";".join(sorted({str(o[c]) for o in src})) for c in PROVENANCE_COLUMNS}
 
 
-def _timing_calls() -> int:
-    from tracer.timing import timing_calls
-    return timing_calls()
-
-
-LEDGER = Ledger()
-
-
-def start_target() -> None:
-    """Called by the CLI before each target: a fresh :data:`LEDGER`."""
-    LEDGER.reset()
-
-
-def write_meta(out_dir, target: str, started: float, **extra) -> Path:
-    from tracer.timing import host_info
-    src = LEDGER.sources()
-    meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
-            "wall_seconds": round(time.time() - started, 2),
-            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            "measured_by": {"commits": sorted({str(o["commit"]) for o in src}),
-                            "hosts": sorted({str(o["host"]) for o in src}),
-                            "clocks": sorted({str(o["clock"]) for o in src}), "sources": src,
-                            "points_measured_now": LEDGER.measured, "points_reused": LEDGER.reused,
-                            "stale_points_reused": LEDGER.stale},
-            **extra}
-    return write_json(Path(out_dir) / "meta.json", meta)
-
-
 class PointStore:
     """One JSON file per measured point, named by the point's parameters and holding the
     measurement key (:func:`tracer.provenance.measurement_key`: code digest, threads, clock, CPU,
@@ -248,19 +137,18 @@ class PointStore:
     the experiment/cost-model files (repository-relative) that shape the point, beside ``tracer/``
     which is always in the key."""
 
-    DEFAULT_CODE = ("experiments/sweep.py", "experiments/executor.py")
+    DEFAULT_CODE = ("experiments/core/point.py", "experiments/core/sweep.py", "experiments/core/executor.py")
 
-    def __init__(self, directory, force: bool = False, code: tuple = (), reuse_stale: bool = False):
+    def __init__(self, directory, force: bool = False, code: tuple = (), reuse_stale: bool = False,
+                 ledger: "Ledger | None" = None, ctx=None):
         self.dir = Path(directory) / "points"
         self.force = force
         self.reuse_stale = reuse_stale
+        self.ledger = ledger if ledger is not None else Ledger()
+        #: the run context this store belongs to (sweeps read its quick flag, executor, reference cache)
+        self.ctx = ctx
         self.code = tuple(sorted(set(self.DEFAULT_CODE) | set(code)))
         self._fresh: set[str] = set()  # points measured by this run (visible even with --force)
-
-    @classmethod
-    def for_args(cls, args, code: tuple = (), out=None) -> "PointStore":
-        return cls(out or args.out, force=getattr(args, "force", False), code=code,
-                   reuse_stale=getattr(args, "reuse_stale", False))
 
     @property
     def measurement_key(self) -> dict:
@@ -301,8 +189,8 @@ class PointStore:
         if rec is None:
             return None
         if self.key(params) not in self._fresh:  # a point stored in this run is in the ledger already
-            LEDGER.reused += 1
-            LEDGER.add(rec.get("provenance") or {}, stale=rec["stale"])
+            self.ledger.reused += 1
+            self.ledger.add(rec.get("provenance") or {}, stale=rec["stale"])
         return rec["value"]
 
     def provenance(self, params: dict) -> dict:
@@ -314,11 +202,11 @@ class PointStore:
     def put(self, params: dict, value, provenance: dict | None = None) -> dict:
         """Store ``value`` measured now (or by ``provenance``, e.g. a Dask worker's host)."""
         k = self.key(params)
-        prov = {**LEDGER.now(), **(provenance or {}), "measured": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        prov = {**self.ledger.now(), **(provenance or {}), "measured": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         write_json(self.dir / f"{k}.json", {"key": self.measurement_key, "provenance": prov, "value": value})
         self._fresh.add(k)
-        LEDGER.measured += 1
-        LEDGER.add(prov)
+        self.ledger.measured += 1
+        self.ledger.add(prov)
         return value
 
     def measure(self, params: dict, fn) -> tuple[dict, bool]:
@@ -329,10 +217,9 @@ class PointStore:
         return self.put(params, fn()), False
 
 
-def write_index(out_dir="results") -> Path:
-    """results/README.md: a link to every target's summary, data and figure present on disk."""
-    out_dir = Path(out_dir)
-    figs = REPO / "paper_figs"
+def write_index(out_dir, fig_dir) -> Path:
+    """<out>/README.md: a link to every target's summary, data and figure present on disk."""
+    out_dir, figs = Path(out_dir), Path(fig_dir)
     lines = ["# Results", "", "Output of the last run of each target (`python -m experiments.run <target>`). "
              "Each folder holds tidy CSV (one row per measurement), `summary.md` (ours beside the paper) and "
              "`meta.json` (commit, versions, CPU, threads, seeds, wall time).", "",
@@ -343,5 +230,5 @@ def write_index(out_dir="results") -> Path:
         fig = sorted(f for f in figs.glob(f"{d.name}*.p[nd][gf]") if f.stem == d.name or f.stem.startswith(d.name + "_"))
         lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
                      + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs[:6]) or "–") + " | "
-                     + (", ".join(f"[{f.name}](../paper_figs/{f.name})" for f in fig) or "–") + " |")
+                     + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")

@@ -11,7 +11,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import atomic_write, finish_figure, log_scale, progress, write_csv, write_meta
+from experiments.core.store import atomic_write
+
+from experiments.core.figures import log_scale
+
+from experiments.core.common import progress
 
 TARGET = "fournier-table1"
 
@@ -123,7 +127,7 @@ def measure_scene(name, args, res, repeats, flat_max, log=print) -> list[dict]:
     return rows
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     from tracer.spd import parse
     from tracer.timing import set_threads
     started = time.time()
@@ -146,13 +150,13 @@ def run(args, log=print) -> dict:
     df = pd.DataFrame(rows)
     wide = _wide(df)
     t1 = _table1(df)
-    write_csv(out_dir / "rows.csv", df)
-    write_csv(out_dir / "scenes.csv", wide)
-    write_csv(out_dir / "table1.csv", t1)
+    ctx.write_csv(out_dir / "rows.csv", df)
+    ctx.write_csv(out_dir / "scenes.csv", wide)
+    ctx.write_csv(out_dir / "table1.csv", t1)
     md = _summary(df, wide, t1, res, repeats, threads, args)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df)
-    write_meta(out_dir, TARGET, started, threads=threads, rays_per_scene=res * res, ray_kind="spd-camera",
+    _figure(ctx, df)
+    ctx.write_meta(out_dir, TARGET, started, threads=threads, rays_per_scene=res * res, ray_kind="spd-camera",
                repeats=repeats, scenes=names, quick=quick, flat_max=flat_max, nogrid_max=args.nogrid_max,
                sortedlists={"leaf_size": args.leaf_size, "branching": args.branching}, grid_res=[30, 30, 30])
     log(md)
@@ -220,7 +224,7 @@ def _summary(df, wide, t1, res, repeats, threads, args) -> str:
     lines = [
         "# Table 1 (Fournier & Poulin 1993): sorted event lists vs a 30³ uniform grid", "",
         f"SPD scenes made of triangles (`tracer.spd`), {res}x{res} eye rays from each SPD viewpoint "
-        f"({res * res:,} rays per scene), {threads} thread(s), median of {repeats} timed run(s). Sorted lists: "
+        f"({res * res:,} rays per scene), {threads} thread(s), median of {repeats} timed run(ctx, s). Sorted lists: "
         f"`SortedLists(leaf_size={args.leaf_size}, branching={args.branching})` (hierarchy) and "
         "`hierarchy=False` (flat, the paper's Table 1); grid: `UniformGrid(res=(30, 30, 30))`; no grid: a 1³ grid "
         "(every triangle tested); the grid's tests are also given with mailboxing (`mailbox=True`, no triangle tested "
@@ -326,7 +330,7 @@ def _claims(wide, t1) -> list[str]:
     return out
 
 
-def _figure(df):
+def _figure(ctx, df):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -373,13 +377,13 @@ def _figure(df):
                     lab.append(ll)
         axes[i][-1].legend(h, lab, fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     fig.suptitle("Fournier & Poulin 1993: sorted event lists vs a 30³ grid, SPD scenes (eye rays)", fontsize=9)
-    finish_figure(fig, TARGET)
+    ctx.finish_figure(fig, TARGET)
 
 
-def main(args) -> int:
-    out = run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    out = run(ctx, args, log=(lambda *a: None) if args.json else print)
     if args.json:
-        from experiments.common import emit_json
+        from experiments.core.common import emit_json
         import json
         records = lambda df: json.loads(df.to_json(orient="records"))  # noqa: E731 (NaN -> null)
         emit_json({"target": TARGET, "scenes": records(out["scenes"]), "table1": records(out["table1"])})

@@ -12,8 +12,8 @@ import time
 from pathlib import Path
 
 from costmodel.select import DEFAULT_SAMPLE, GRID_FACTOR, GridcostEstimator, HapalaEstimator, Selector, records
-from experiments.common import add_scene_args, emit_json
-from experiments.hapala_table1 import measure_all, load_any
+from experiments.core.common import add_scene_args, emit_json
+from experiments.hapala.table1 import measure_all, load_any
 from tracer.constants import HAPALA_EPS
 from tracer.errors import GridcostError
 
@@ -34,7 +34,7 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def calibration(out, quick: bool, log=print):
+def calibration(ctx, out, quick: bool, log=print):
     """(records, source): table1h's raw measurements, else the built-in quick calibration (stored
     under ``out``/points, so a second call is instant)."""
     raw_path = Path(out) / "table1h" / "raw.json"
@@ -42,11 +42,11 @@ def calibration(out, quick: bool, log=print):
         return records(json.loads(raw_path.read_text())), str(raw_path)
     cfg = {"rays": 1000, "repeats": 2, "grid_factor": GRID_FACTOR, "seed": 0, "samples": [100, 300, 1000],
            "hiers": ["kdtree"]}
-    raw = measure_all(BUILTIN, cfg, out, log=log)
+    raw = measure_all(ctx, BUILTIN, cfg, log=log)
     return records(raw), f"built-in quick calibration ({len(BUILTIN)} small scenes, 1,000 rays per kind)"
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     from tracer.scene import load_mesh
     from tracer.timing import set_threads
     started = time.time()
@@ -54,7 +54,7 @@ def run(args, log=print) -> dict:
         raise GridcostError(f"--rays must be >= 0, got {args.rays:g}")
     set_threads(args.threads or 1)
     scene = load_mesh(args.mesh) if args.mesh else load_any(args.scene)
-    cal, source = calibration(args.out, args.quick, log=log)
+    cal, source = calibration(ctx, args.out, args.quick, log=log)
     sel = Selector(ESTIMATORS[args.estimator](), eps=args.eps, sample_rays=args.sample_rays, kind=args.kind,
                    seed=args.seed).fit(cal)
     out = sel.decide(scene, args.rays)
@@ -63,8 +63,8 @@ def run(args, log=print) -> dict:
     return out
 
 
-def main(args) -> int:
-    res = run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    res = run(ctx, args, log=(lambda *a: None) if args.json else print)
     if args.json:
         inf = res["rc_est"] == float("inf")
         emit_json({**res, "rc_est": None if inf else res["rc_est"], "rc_est_infinite": inf})

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
-from experiments.sweep import PAIRED_REPEATS, PAIRED_ROUNDS, paired_plane, sweep
+from experiments.core.store import atomic_write
+from experiments.core.sweep import PAIRED_REPEATS, PAIRED_ROUNDS, paired_plane, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -42,7 +42,7 @@ def plane(n: int, kind: str, c1s, c2s) -> list[dict]:
     return out
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -52,7 +52,7 @@ def main(args) -> int:
     c1s, c2s = (C1[1::2], C2[::2]) if args.quick else (C1, C2)
     n_rays = args.rays or (5_000 if args.quick else 50_000)
     repeats = args.repeats or (3 if args.quick else 5)
-    store = PointStore.for_args(args)
+    store = ctx.store()
     frames, lines = [], ["# Figure 5 (Ize 2007): two-level grid resolution plane, % time over the best", "",
                          f"Random rays ({n_rays:,}), {threads} thread(s). Every point of a plane is timed side by side "
                          f"in interleaved rounds ({'quick' if args.quick else f'{PAIRED_ROUNDS} rounds of {PAIRED_REPEATS} samples'}; "
@@ -90,10 +90,10 @@ def main(args) -> int:
         near = df.iloc[int(np.argmin(np.hypot(df.c1 - t1, df.c2 - t2)))]
         lines.append(f"| {name} | {kind} | ({best.c1:g}, {best.c2:g}) | ({t1:.2f}, {t2:g}) ≈ ({near.c1:g}, {near.c2:g}) | "
                      f"{near.pct_over_best:.1f}% | {near.pct_over_best_sweep:.1f}% |")
-    finish_figure(fig, "fig5")
+    ctx.finish_figure(fig, "fig5")
     out_dir = Path(args.out) / "fig5"
     allp = pd.concat(frames, ignore_index=True)
-    write_csv(out_dir / "fig5.csv", allp)
+    ctx.write_csv(out_dir / "fig5.csv", allp)
     bests = allp.loc[allp.groupby("scene").pct_over_best.idxmin()]
     lines += ["", "The paper finds its theory point 'usually very close to the optimal point'; the fifth column is "
               "how close it is here (the nearest swept point to the theory's). The fastest points have "
@@ -105,7 +105,7 @@ def main(args) -> int:
               f"{(allp.pct_over_best - allp.pct_over_best_sweep).abs().median():.1f} points (median over the plane)."]
     md = "\n".join(lines) + "\n"
     atomic_write(out_dir / "summary.md", md)
-    write_meta(out_dir, "fig5", started, threads=threads, rays=n_rays, repeats=repeats, seed=args.seed, quick=args.quick)
+    ctx.write_meta(out_dir, "fig5", started, threads=threads, rays=n_rays, repeats=repeats, seed=args.seed, quick=args.quick)
     if not args.json:
         print(md)
     return 0

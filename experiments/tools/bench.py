@@ -15,8 +15,9 @@ import sys
 import time
 
 
-from experiments.common import add_scene_args, emit_json, scene_from_args
-from experiments.results import progress, write_json
+from experiments.core.common import add_scene_args, emit_json, scene_from_args
+from experiments.core.store import write_json
+from experiments.core.common import progress
 from tracer.accel import build
 from tracer.rays import make_rays
 from tracer.timing import build_clock, host_info, set_threads, time_call
@@ -152,7 +153,7 @@ def _paired(scene, rays, s, threads, log, rounds: int = 7) -> dict:
     return out
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     scene = scene_from_args(args)
     names = [n.strip() for n in args.structures.split(",") if n.strip()]
     log = (lambda *a, **k: None) if args.json else print

@@ -14,7 +14,8 @@ import pandas as pd
 
 from costmodel.select import (ERR_CAP, R_VALUES, SAMPLE_SIZES, GridcostEstimator, HapalaEstimator, evaluate,
                               exact_rc, loo_errors, records)
-from experiments.results import atomic_write, finish_figure, log_scale, write_csv, write_meta
+from experiments.core.store import atomic_write
+from experiments.core.figures import log_scale
 
 KIND = {"fig1h": "random", "fig2h": "path"}
 ESTIMATORS = {"paper": HapalaEstimator, "ours": GridcostEstimator}
@@ -35,24 +36,24 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def load_raw(args, log=print) -> list[dict]:
+def load_raw(ctx, args, log=print) -> list[dict]:
     """table1h's measurements; run table1h first (same --quick / --out) when they are missing."""
     import json
     path = Path(args.out) / "table1h" / "raw.json"
     if not path.exists():
         log(f"{path} missing: running table1h first")
-        from experiments import hapala_table1
+        from experiments.hapala import table1 as hapala_table1
         import argparse
         a = argparse.Namespace(**{**vars(args), "target": "table1h", "scenes": None, "rays": None, "repeats": None,
                                   "grid_factor": None, "json": False})
-        hapala_table1.run(a, log=log)
+        hapala_table1.run(ctx, a, log=log)
     return json.loads(path.read_text())
 
 
 def paper_frame(kind: str) -> pd.DataFrame:
     """The paper's Table 1 as calibration records (seconds), R_C recomputed from its rounded times
     (the printed R_C column is kept as ``R_C_table``; the table's "0" means the grid wins outright)."""
-    from experiments.hapala_table1 import PAPER
+    from experiments.hapala.table1 import PAPER
     c = 5 if kind == "random" else 8
     df = pd.DataFrame({"scene": [p[0] for p in PAPER], "N": [p[1] for p in PAPER],
                        "T_BG": [p[3] * 1e-3 for p in PAPER], "T_BH": [p[4] * 1e-3 for p in PAPER],
@@ -97,11 +98,11 @@ def speed_accuracy(raw, kind, hier, splits, seed, ev: dict) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     kind = KIND.get(args.target, "random")
     splits = args.splits or (100 if args.quick else 5000)
-    raw = load_raw(args, log=log)
+    raw = load_raw(ctx, args, log=log)
     cal_all = records(raw, hier=args.hier)
     cal = cal_all[cal_all.kind == kind].reset_index(drop=True)
     S = len(cal)
@@ -126,23 +127,23 @@ def run(args, log=print) -> dict:
     rpath = Path(args.out) / "table1h" / "raw_retest.json"
     if rpath.exists():
         import json
-        from experiments.hapala_table1 import retest
+        from experiments.hapala.table1 import retest
         rt = retest(raw, json.loads(rpath.read_text()))
         rt = rt[(rt.hier == args.hier) & (rt.kind == kind)]
         floor = rt.iloc[0] if len(rt) else None
 
     err = pd.concat([df.assign(estimator=name) for name, df in ev.items()], ignore_index=True)
-    write_csv(out_dir / "err_vs_C.csv", err)
-    write_csv(out_dir / "loo.csv", pd.concat([df.assign(estimator=n) for n, df in loo.items()], ignore_index=True))
-    write_csv(out_dir / "speed_accuracy.csv", sa)
+    ctx.write_csv(out_dir / "err_vs_C.csv", err)
+    ctx.write_csv(out_dir / "loo.csv", pd.concat([df.assign(estimator=n) for n, df in loo.items()], ignore_index=True))
+    ctx.write_csv(out_dir / "speed_accuracy.csv", sa)
     forms = pd.DataFrame([{"quantity": q, "form": f, "loo_mean_abs_rel_err_pct": 100 * v,
                            "chosen": f == getattr(full, f"{q}_form_")}
                           for q in ("build", "ray", "grid") for f, v in getattr(full, f"{q}_cv_").items()])
-    write_csv(out_dir / "forms.csv", forms)
+    ctx.write_csv(out_dir / "forms.csv", forms)
     md = summary(args.target, kind, args.hier, cal, ev, loo, full, forms, sa, ev_other, other, splits, floor)
     atomic_write(out_dir / "summary.md", md)
-    figure(args.target, kind, ev, sa, floor)
-    write_meta(out_dir, args.target, started, ray_kind=kind, hier=args.hier, splits=splits, seed=args.seed,
+    figure(ctx, args.target, kind, ev, sa, floor)
+    ctx.write_meta(out_dir, args.target, started, ray_kind=kind, hier=args.hier, splits=splits, seed=args.seed,
                scenes=S, quick=bool(args.quick), err_cap_pct=ERR_CAP, ray_budgets=[float(r) for r in R_VALUES])
     log(md)
     return {"err": err, "loo": loo, "forms": forms}
@@ -315,7 +316,7 @@ def _lost_note(cal, loo_ours) -> str:
             + " (time lost on that scene, averaged over the ray budgets).")
 
 
-def figure(target, kind, ev, sa, floor=None) -> None:
+def figure(ctx, target, kind, ev, sa, floor=None) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -355,13 +356,13 @@ def figure(target, kind, ev, sa, floor=None) -> None:
     ax.set(xlabel="cost (s): calibration phase, or the decision's ray sample", ylabel="mean |Err| (%)",
            title="speed against accuracy")
     ax.legend(fontsize=6)
-    finish_figure(fig, target)
+    ctx.finish_figure(fig, target)
 
 
-def main(args) -> int:
-    res = run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    res = run(ctx, args, log=(lambda *a: None) if args.json else print)
     if args.json:
-        from experiments.common import emit_json
+        from experiments.core.common import emit_json
         err = res["err"]
         out = {}
         for name in ("paper", "ours"):

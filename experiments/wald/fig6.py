@@ -20,8 +20,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.packet import PacketCostFit, best_config
-from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, PointStore, progress, write_csv, write_meta
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.common import progress
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -78,7 +79,7 @@ def _row(scene, params: dict, cgt, rays, seconds: list, spread: float) -> dict:
             **packet_work(cgt, rays), "threads": numba.get_num_threads()}
 
 
-def measure_points(store: PointStore, target: str, scene, param_list, side, repeats, threads, log) -> list[dict]:
+def measure_points(store, target: str, scene, param_list, side, repeats, threads, log) -> list[dict]:
     """Time every parameter set on one scene not in the point store yet: build all, then
     ``repeats`` interleaved rounds of :func:`tracer.timing.time_call` samples (a warm-up call
     first), so a burst of load on a shared machine hits every point alike; per point the median
@@ -157,7 +158,7 @@ def add_arguments(p) -> None:
     p.add_argument("--packet", type=int, default=8, help="packet size k (k x k rays)")
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
@@ -166,7 +167,7 @@ def run(args, log=print) -> dict:
     repeats = args.repeats or (5 if quick else 9)  # the curves are flat: more rounds against load noise
     lams = QUICK_LAMBDAS if quick else LAMBDAS
     out_dir = Path(args.out) / "wald-fig6"
-    store = PointStore.for_args(args, code=("experiments/wald_fig6.py",))
+    store = ctx.store(code=("experiments/wald/fig6.py",))
     rows = []
     for name in progress(names, "wald-fig6", quiet=getattr(args, "json", False)):
         scene = load_scene(name)
@@ -177,14 +178,14 @@ def run(args, log=print) -> dict:
     pred, best = loso_predictions(df, "lam")
     df = df.merge(pred[["scene", "lam", "predicted"]], on=["scene", "lam"], how="left")
     fit = pooled_fit(df)
-    write_csv(out_dir / "fig6.csv", df)
-    write_csv(out_dir / "best.csv", best)
-    write_csv(out_dir / "constants.csv", pd.DataFrame([{"name": n, "value": v, "ci_lo": fit.ci_[n][0], "ci_hi": fit.ci_[n][1]}
+    ctx.write_csv(out_dir / "fig6.csv", df)
+    ctx.write_csv(out_dir / "best.csv", best)
+    ctx.write_csv(out_dir / "constants.csv", pd.DataFrame([{"name": n, "value": v, "ci_lo": fit.ci_[n][0], "ci_hi": fit.ci_[n][1]}
                                                        for n, v in fit.constants_.items()]))
     md = _summary(df, best, fit, side, repeats, threads, args.packet)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df)
-    write_meta(out_dir, "wald-fig6", started, threads=threads, side=side, repeats=repeats, scenes=names,
+    _figure(ctx, df)
+    ctx.write_meta(out_dir, "wald-fig6", started, threads=threads, side=side, repeats=repeats, scenes=names,
                lambdas=list(lams), packet=args.packet, quick=quick)
     log(md)
     return {"table": df, "best": best}
@@ -219,7 +220,7 @@ def _summary(df, best, fit, side, repeats, threads, k) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(df):
+def _figure(ctx, df):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -237,9 +238,9 @@ def _figure(df):
     axes[0].set_ylabel("time / best time")
     axes[1].set_ylabel("ns per ray (dotted: cost model, LOSO)")
     axes[0].legend(fontsize=6)
-    finish_figure(fig, "wald-fig6")
+    ctx.finish_figure(fig, "wald-fig6")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

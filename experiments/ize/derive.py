@@ -94,7 +94,7 @@ def render_markdown(report: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     from costmodel.derive import report as derive_report
 
     rep = derive_report()

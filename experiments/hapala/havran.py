@@ -13,8 +13,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.select import GRID_FACTOR, havran_stats, records
-from experiments.hapala_table1 import PAPER, PAPER_MATCH, default_scenes, load_any
-from experiments.results import atomic_write, progress, write_csv, write_meta
+from experiments.hapala.table1 import PAPER, PAPER_MATCH, default_scenes, load_any
+from experiments.core.store import atomic_write
+from experiments.core.common import progress
 
 COLS = ["sparseness_eq1", "sparseness_cells", "max_refs", "mean", "variance", "sigma", "skewness", "kurtosis"]
 
@@ -33,7 +34,7 @@ def stats_for(name: str, factor: float) -> dict:
             **havran_stats(grid)}
 
 
-def run(args, log=print) -> pd.DataFrame:
+def run(ctx, args, log=print) -> pd.DataFrame:
     started = time.time()
     out_dir = Path(args.out) / "havran"
     raw_path = Path(args.out) / "table1h" / "raw.json"
@@ -50,10 +51,10 @@ def run(args, log=print) -> pd.DataFrame:
         r["paper_sigma"] = p[2] if p else None
         rows.append(r)
     df = pd.DataFrame(rows).sort_values("N", kind="stable").reset_index(drop=True)
-    write_csv(out_dir / "havran.csv", df)
+    ctx.write_csv(out_dir / "havran.csv", df)
     md = summary(df, args.grid_factor)
     atomic_write(out_dir / "summary.md", md)
-    write_meta(out_dir, "havran", started, scenes=names, grid_factor=args.grid_factor)
+    ctx.write_meta(out_dir, "havran", started, scenes=names, grid_factor=args.grid_factor)
     log(md)
     return df
 
@@ -92,9 +93,9 @@ def summary(df: pd.DataFrame, factor: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(args) -> int:
-    df = run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    df = run(ctx, args, log=(lambda *a: None) if args.json else print)
     if args.json:
-        from experiments.common import emit_json
+        from experiments.core.common import emit_json
         emit_json({"scenes": df.to_dict(orient="records")})
     return 0

@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments import memprobe
-from experiments.common import scene_list
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
-from experiments.sweep import fastest, nearest, paired_penalties, penalty_pct, sweep
+from experiments.ize import memprobe
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, sweep
 from tracer.memory import cache_bytes
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -43,7 +43,7 @@ def cells_sweep(n: int, points: int) -> list[dict]:
     return [{"cells": float(round(m))} for m in sorted(set(np.round(grid).tolist()) | {8.0 * n, round(8.0 * n**1.5)})]
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
@@ -51,7 +51,7 @@ def run(args, log=print) -> dict:
     n_rays = args.rays or (5_000 if quick else 50_000)
     repeats = args.repeats or (3 if quick else 5)
     out_dir = Path(args.out) / "table3"
-    store = PointStore.for_args(args, code=("experiments/memprobe.py",))  # one point store shared by all targets
+    store = ctx.store(code=("experiments/ize/memprobe.py",))  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
     rows, scenes, rays = [], {}, {}
     for name in names:
@@ -114,14 +114,14 @@ def run(args, log=print) -> dict:
                   "paper_speedup": p[5], "paper_size": p[6]})
         table.append(e)
     tab, fit_df = pd.DataFrame(table), pd.DataFrame(fits)
-    write_csv(out_dir / "table3.csv", df)
-    write_csv(out_dir / "table3_summary.csv", tab)
-    write_csv(out_dir / "fits.csv", fit_df)
+    ctx.write_csv(out_dir / "table3.csv", df)
+    ctx.write_csv(out_dir / "table3_summary.csv", tab)
+    ctx.write_csv(out_dir / "fits.csv", fit_df)
     md = _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df, scenes)
-    _memory_figure(df, tab)
-    write_meta(out_dir, "table3", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
+    _figure(ctx, df, scenes)
+    _memory_figure(ctx, df, tab)
+    ctx.write_meta(out_dir, "table3", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
                scenes=names, quick=quick, fitted_ti_over_ts=ratio)
     log(md)
     return {"table": tab}
@@ -155,7 +155,7 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
         lines.append(f"| {r.scene} | {r.ray_kind} | {r.eq5_mape_pct:.1f}% | {r.eq1_mape_pct:.1f}% | {r.eq5_r2:.3f} | {r.eq1_r2:.3f} |")
     lines += ["", "## Where the time of a large grid goes", "",
               "Ize's cost model charges Ts per step and Ti per test whatever the grid's size. Probed in this run "
-              "(`experiments/memprobe.py`): T0 and the cost of an empty step from rays inside the cylinder's hollow "
+              "(`experiments/ize/memprobe.py`): T0 and the cost of an empty step from rays inside the cylinder's hollow "
               "through three grid sizes, Ti from a one-cell grid. The count model T0 + Ts·steps + Ti·tests with these "
               "memory-free costs is set against each swept grid; the excess is what the counts do not explain "
               "(figure `paper_figs/table3_memory.png`).", "",
@@ -192,7 +192,7 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
 
 
 def _memory_split(df, scene, random_rays, quick) -> dict:
-    """Probe the memory-free costs (:mod:`experiments.memprobe`) and split the time of the theory's
+    """Probe the memory-free costs (:mod:`experiments.ize.memprobe`) and split the time of the theory's
     M and of the best M into the count model and the excess over it."""
     c = memprobe.memory_free_costs(scene, random_rays, quick=quick)
     k = df[(df.scene == scene.name) & (df.ray_kind == "random")].drop_duplicates("cells")
@@ -206,7 +206,7 @@ def _memory_split(df, scene, random_rays, quick) -> dict:
             "memory_best_MiB": best.memory_bytes / 2**20}
 
 
-def _memory_figure(df, tab):
+def _memory_figure(ctx, df, tab):
     """Excess over the memory-free count model against the structure's size, L2 and L3 marked."""
     import matplotlib
     matplotlib.use("Agg")
@@ -222,10 +222,10 @@ def _memory_figure(df, tab):
     ax.set_ylabel("measured − count model (ns/ray)")
     ax.tick_params(labelsize=7)
     ax.legend(fontsize=6)
-    finish_figure(fig, "table3_memory")
+    ctx.finish_figure(fig, "table3_memory")
 
 
-def _figure(df, scenes):
+def _figure(ctx, df, scenes):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -245,9 +245,9 @@ def _figure(df, scenes):
         ax.tick_params(labelsize=7)
     axes[0][0].set_ylabel("time per ray (ns)")
     axes[0][-1].legend(fontsize=6)
-    finish_figure(fig, "table3")
+    ctx.finish_figure(fig, "table3")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, progress, write_csv, write_meta
-from experiments.wald_table1 import count_tests
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.common import progress
+from experiments.wald.table1 import count_tests
 from tracer.grid import UniformGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -48,7 +49,7 @@ def single_ray(scene, res, side: int, exact: bool) -> dict:
     return {"tests": float(cnt["tests"].mean()), "cells": float(cnt["steps"].mean())}
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads)
     quick = args.quick
@@ -81,11 +82,11 @@ def run(args, log=print) -> dict:
         log(f"  {name}: cells {row['cells_single']:.1f} / {row['cells_4x4']:.2f} / {row['cells_8x8']:.2f}, "
             f"tests {row['tests_single']:.2f} / {row['tests_4x4']:.2f} / {row['tests_8x8']:.2f} per ray")
     df = pd.DataFrame(rows)
-    write_csv(out_dir / "table4.csv", df)
+    ctx.write_csv(out_dir / "table4.csv", df)
     md = _summary(df, side, args.exact)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df)
-    write_meta(out_dir, "wald-table4", started, threads=threads, side=side, exact=args.exact, scenes=names, quick=quick)
+    _figure(ctx, df)
+    ctx.write_meta(out_dir, "wald-table4", started, threads=threads, side=side, exact=args.exact, scenes=names, quick=quick)
     log(md)
     return {"table": df}
 
@@ -122,7 +123,7 @@ def _summary(df, side, exact) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(df):
+def _figure(ctx, df):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -137,9 +138,9 @@ def _figure(df):
         ax.set_xticks(x, df.scene, fontsize=6, rotation=20)
         ax.set_ylabel(f"{'visited cells' if what == 'cells' else 'ray-triangle tests'} per ray")
         ax.legend(fontsize=6)
-    finish_figure(fig, "wald-table4")
+    ctx.finish_figure(fig, "wald-table4")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

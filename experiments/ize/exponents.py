@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import ExponentFit, refine_minimum, work_cost
-from experiments.ize_table3 import cells_sweep
-from experiments.results import PointStore, atomic_write, finish_figure, write_csv, write_meta
-from experiments.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
+from experiments.ize.table3 import cells_sweep
+from experiments.core.store import atomic_write
+from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -94,10 +94,10 @@ def best_m(scene, kind, n_rays, repeats, store, quick, seed) -> tuple[float, pd.
     return float(df.loc[df.ns_per_ray.idxmin()].cells), df
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     started = time.time()
     threads = set_threads(args.threads or 1)
-    store = PointStore.for_args(args)
+    store = ctx.store()
     wanted = [f.strip() for f in args.families.split(",")] if args.families else None
     fams = {k: v for k, v in FAMILIES.items() if not wanted or any(k.startswith(w) for w in wanted)}
     if args.quick and not wanted:
@@ -128,12 +128,12 @@ def main(args) -> int:
                                   args.rays or 10_000, args.seed))
     tab = pd.DataFrame(rows)
     out_dir = Path(args.out) / "exponents"
-    write_csv(out_dir / "exponents.csv", tab)
-    write_csv(out_dir / "points.csv", pd.concat(points, ignore_index=True))
+    ctx.write_csv(out_dir / "exponents.csv", tab)
+    ctx.write_csv(out_dir / "points.csv", pd.concat(points, ignore_index=True))
     md = _summary(tab)
     atomic_write(out_dir / "summary.md", md)
-    _figure(tab)
-    write_meta(out_dir, "exponents", started, threads=threads, quick=args.quick, seed=args.seed)
+    _figure(ctx, tab)
+    ctx.write_meta(out_dir, "exponents", started, threads=threads, quick=args.quick, seed=args.seed)
     if args.json:
         json.dump({"families": tab.to_dict(orient="records")}, sys.stdout, default=float)
         print()
@@ -169,7 +169,7 @@ def _summary(tab) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(tab):
+def _figure(ctx, tab):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -186,4 +186,4 @@ def _figure(tab):
     ax.set_xlabel("triangles N")
     ax.set_ylabel("best grid cells M")
     ax.legend(fontsize=6)
-    finish_figure(fig, "exponents")
+    ctx.finish_figure(fig, "exponents")

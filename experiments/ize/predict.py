@@ -15,18 +15,18 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit
-from experiments.results import atomic_write, finish_figure, write_csv, write_meta
+from experiments.core.store import atomic_write
 
 
 def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def _rows(args) -> pd.DataFrame:
+def _rows(ctx, args) -> pd.DataFrame:
     path = Path(args.out) / "table2" / "table2.csv"
     if not path.exists():
-        from experiments import ize_table2
-        ize_table2.run(argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None}),
+        from experiments.ize import table2 as ize_table2
+        ize_table2.run(ctx, argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None}),
                        log=lambda *a: None)
     return pd.read_csv(path)
 
@@ -57,9 +57,9 @@ def holdout(df: pd.DataFrame, test: str, train: list[str], points: int | None = 
             "ts": fit.ts_, "ti": fit.ti_, "calibrated_setup": calibrate_setup}
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     started = time.time()
-    df = _rows(args)
+    df = _rows(ctx, args)
     df = df[(df.ray_kind == "random") & (df.structure == "grid")]
     scenes = list(dict.fromkeys(df.scene))
     if len(scenes) < 2:
@@ -80,8 +80,8 @@ def main(args) -> int:
                 cost.append({**r, "n_train": c, "rep": rep})
     cost = pd.DataFrame(cost)
     out_dir = Path(args.out) / "predict"
-    write_csv(out_dir / "loo.csv", loo)
-    write_csv(out_dir / "calibration_cost.csv", cost)
+    ctx.write_csv(out_dir / "loo.csv", loo)
+    ctx.write_csv(out_dir / "calibration_cost.csv", cost)
     cal = loo[loo.calibrated_setup]
     lines = ["# Cross-scene prediction with the counter cost model", "",
              "Leave one scene out: Ts and Ti fitted on the other scenes' sweeps (random rays), the held-out runtime "
@@ -100,8 +100,8 @@ def main(args) -> int:
               "scenes and sweep points per scene (mean of 10 random choices)."]
     md = "\n".join(lines) + "\n"
     atomic_write(out_dir / "summary.md", md)
-    _figure(cost)
-    write_meta(out_dir, "predict", started, scenes=scenes, seed=args.seed)
+    _figure(ctx, cost)
+    ctx.write_meta(out_dir, "predict", started, scenes=scenes, seed=args.seed)
     if args.json:
         json.dump({"loo": loo.to_dict(orient="records"), "mean_mape_pct": float(cal.mape_pct.mean())}, sys.stdout,
                   default=float)
@@ -111,7 +111,7 @@ def main(args) -> int:
     return 0
 
 
-def _figure(cost):
+def _figure(ctx, cost):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -122,4 +122,4 @@ def _figure(cost):
     ax.set_xlabel("calibration scenes")
     ax.set_ylabel("held-out MAPE (%)")
     ax.legend(fontsize=7)
-    finish_figure(fig, "predict")
+    ctx.finish_figure(fig, "predict")

@@ -50,3 +50,13 @@ def scene_list(args, quick_scenes, full_scenes) -> list[str]:
     if getattr(args, "scenes", None):
         return [n.strip() for n in args.scenes.split(",") if n.strip()]
     return list(quick_scenes if args.quick else full_scenes)
+
+
+def progress(iterable, desc: str, total: int | None = None, quiet: bool = False, unit: str = "scene"):
+    """A tqdm progress bar with ETA over ``iterable`` on stderr; silent under ``--json`` (``quiet``)
+    and when stderr is not a terminal (or TQDM_DISABLE=1)."""
+    import os
+
+    from tqdm import tqdm
+    disable = True if quiet or os.environ.get("TQDM_DISABLE") == "1" else None
+    return tqdm(iterable, desc=desc, total=total, unit=unit, leave=False, disable=disable, dynamic_ncols=True)

@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from experiments.common import scene_list
-from experiments.results import atomic_write, finish_figure, progress, write_csv, write_meta
+from experiments.core.common import scene_list
+from experiments.core.store import atomic_write
+from experiments.core.common import progress
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
@@ -65,7 +66,7 @@ def kdtree_tests(scene, side: int) -> float:
     return float(cnt["tests"].mean())
 
 
-def run(args, log=print) -> dict:
+def run(ctx, args, log=print) -> dict:
     started = time.time()
     threads = set_threads(args.threads)
     quick = args.quick
@@ -93,11 +94,11 @@ def run(args, log=print) -> dict:
         df["paper_mb_factor"] = df.paper_nn / df.paper_yn
         df["paper_fc_factor"] = df.paper_yn / df.paper_yy
         df["paper_total_factor"] = df.paper_nn / df.paper_yy
-    write_csv(out_dir / "table1.csv", df)
+    ctx.write_csv(out_dir / "table1.csv", df)
     md = _summary(df, side, args.packet, args.exact)
     atomic_write(out_dir / "summary.md", md)
-    _figure(df)
-    write_meta(out_dir, "wald-table1", started, threads=threads, side=side, packet=args.packet, exact=args.exact,
+    _figure(ctx, df)
+    ctx.write_meta(out_dir, "wald-table1", started, threads=threads, side=side, packet=args.packet, exact=args.exact,
                scenes=names, quick=quick)
     log(md)
     return {"table": df}
@@ -136,7 +137,7 @@ def _summary(df, side, k, exact) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _figure(df):
+def _figure(ctx, df):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -151,9 +152,9 @@ def _figure(df):
     ax.set_xticks(x, df.scene, fontsize=7)
     ax.set_ylabel("ray-triangle tests per ray")
     ax.legend(fontsize=6)
-    finish_figure(fig, "wald-table1")
+    ctx.finish_figure(fig, "wald-table1")
 
 
-def main(args) -> int:
-    run(args, log=(lambda *a: None) if args.json else print)
+def main(ctx, args) -> int:
+    run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0

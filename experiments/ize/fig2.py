@@ -11,31 +11,31 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import GridCostFit
-from experiments.results import atomic_write, finish_figure, write_meta
+from experiments.core.store import atomic_write
 
 
 def add_arguments(p) -> None:
     pass
 
 
-def _load(args, target):
+def _load(ctx, args, target):
     path = Path(args.out) / target / f"{target}.csv"
     if not path.exists() or args.force:
         import importlib
-        mod = importlib.import_module(f"experiments.ize_{target}")
+        mod = importlib.import_module(f"experiments.ize.{target}")
         sub = argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None, "seed": 0})
-        mod.run(sub, log=lambda *a: None)
+        mod.run(ctx, sub, log=lambda *a: None)
     return pd.read_csv(path)
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     started = time.time()
     panels = []
     for target, form in (("table2", "compact"), ("table3", "skinny")):
-        df = _load(args, target)
+        df = _load(ctx, args, target)
         df = df[df.ray_kind == "random"]
         for scene, k in df.groupby("scene", sort=False):
             panels.append((scene, int(k.N.iloc[0]), form, k.sort_values("cells")))
@@ -55,11 +55,11 @@ def main(args) -> int:
                      f"{g.ti_:.2f} | {g.ti_over_ts_:.2f} | {g.metrics_['r2']:.3f} | {g.metrics_['mape']:.1f}% |")
     axes[0][0].set_ylabel("time per random ray (ns)", fontsize=8)
     axes[0][0].legend(fontsize=6)
-    finish_figure(fig, "fig2")
+    ctx.finish_figure(fig, "fig2")
     lines += ["", "The paper shows the fitted curves 'match very closely'; the MAPE column is how closely ours do."]
     md = "\n".join(lines) + "\n"
     atomic_write(Path(args.out) / "fig2" / "summary.md", md)
-    write_meta(Path(args.out) / "fig2", "fig2", started)
+    ctx.write_meta(Path(args.out) / "fig2", "fig2", started)
     if not args.json:
         print(md)
     return 0

@@ -121,7 +121,7 @@ def render_markdown(rep: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def main(args) -> int:
+def main(ctx, args) -> int:
     rep = report(download=bool(getattr(args, "download", False)))
     outdir = os.path.join(getattr(args, "out", None) or "results", "models")
     _atomic_write(os.path.join(outdir, "models.json"), json.dumps(rep, indent=2) + "\n")

@@ -1,0 +1,118 @@
+"""The run context: everything a target needs from the run that calls it, in one object.
+
+``run.main`` builds one :class:`RunContext` from the command line and passes it to the target's
+``main(ctx, args)``; a test or a notebook builds its own (``RunContext(out=tmp_path, quick=True)``).
+Nothing else holds run state: no module-level flags to set in the right order.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from experiments.core.figures import figure_dir, finish_figure
+from experiments.core.store import PROVENANCE_COLUMNS, Ledger, PointStore, atomic_write, git_commit, versions, write_json
+
+
+@dataclass
+class RunContext:
+    """Output directory, quick mode, threads, executor, the point store's settings, the figure
+    directory, the provenance ledger and the per-run caches of one run."""
+    out: Path = Path("results")
+    quick: bool = False
+    threads: int | None = None
+    force: bool = False
+    reuse_stale: bool = False
+    executor: object = None
+    fig_dir: Path | None = None
+    ledger: Ledger = field(default_factory=Ledger)
+    #: the sweep's reference structure of the current scene (one scene at a time)
+    ref_cache: dict = field(default_factory=dict)
+    #: scenes already loaded in this process (local execution reuses them)
+    scenes: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.out = Path(self.out)
+        if self.fig_dir is None:
+            self.fig_dir = figure_dir(self.out)
+        if self.executor is None:
+            from experiments.core.executor import LocalExecutor
+            self.executor = LocalExecutor(self)
+
+    @classmethod
+    def from_args(cls, args) -> "RunContext":
+        """The context of a command line (``run.main`` only)."""
+        executor = None
+        ctx = cls(out=Path(args.out), quick=bool(getattr(args, "quick", False)), threads=args.threads,
+                  force=bool(getattr(args, "force", False)), reuse_stale=bool(getattr(args, "reuse_stale", False)))
+        if getattr(args, "dask", None):
+            from experiments.core.executor import DaskExecutor
+            executor = DaskExecutor(args.dask, ctx)
+            ctx.executor = executor
+        return ctx
+
+    # ------------------------------------------------------------ per target
+    def start_target(self) -> None:
+        """A fresh ledger before each target."""
+        self.ledger.reset()
+
+    def store(self, code: tuple = (), out=None) -> PointStore:
+        """The point store of this run (``out``/points), keyed by ``code`` beside tracer/."""
+        return PointStore(out or self.out, force=self.force, code=code, reuse_stale=self.reuse_stale,
+                          ledger=self.ledger, ctx=self)
+
+    # ------------------------------------------------------------ writers
+    def write_csv(self, path, df: pd.DataFrame) -> Path:
+        """Write ``df`` atomically; rows without provenance columns (``commit``, ``host``,
+        ``clock``) get the values behind this target's numbers (the ledger); rows of a scene that is
+        a stand-in for a mesh not found are marked (``stand_in``)."""
+        missing = [c for c in PROVENANCE_COLUMNS if c not in df.columns]
+        if missing:
+            df = df.copy()
+            vals = self.ledger.column_values()
+            for c in missing:
+                df[c] = vals[c]
+        from tracer.registry import STAND_INS
+        if "scene" in df.columns and "stand_in" not in df.columns:
+            df = df.copy()
+            df["stand_in"] = df.scene.map(lambda s: STAND_INS.get(s, "")).fillna("")
+        return atomic_write(path, df.to_csv(index=False))
+
+    def write_meta(self, out_dir, target: str, started: float, **extra) -> Path:
+        """meta.json: the commit that drew the file, versions, host, wall time, and ``measured_by``:
+        the distinct commits, hosts and clocks behind its numbers."""
+        from tracer.timing import host_info
+        src = self.ledger.sources()
+        meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
+                "wall_seconds": round(time.time() - started, 2),
+                "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                "measured_by": {"commits": sorted({str(o["commit"]) for o in src}),
+                                "hosts": sorted({str(o["host"]) for o in src}),
+                                "clocks": sorted({str(o["clock"]) for o in src}), "sources": src,
+                                "points_measured_now": self.ledger.measured, "points_reused": self.ledger.reused,
+                                "stale_points_reused": self.ledger.stale},
+                "executor": getattr(self.executor, "name", "local"), **extra}
+        return write_json(Path(out_dir) / "meta.json", meta)
+
+    def finish_figure(self, fig, name: str) -> list[Path]:
+        """Lay out, save (PNG + PDF into this run's figure directory) and close ``fig``."""
+        return finish_figure(fig, name, self.fig_dir)
+
+    def mark_stand_ins(self, summary_path) -> None:
+        """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
+        from tracer.registry import STAND_INS
+        path = Path(summary_path)
+        if not STAND_INS or not path.exists():
+            return
+        text = path.read_text()
+        used = {k: v for k, v in STAND_INS.items() if k in text}
+        if not used or "## Stand-ins" in text:
+            return
+        atomic_write(path, text.rstrip("\n") + "\n\n## Stand-ins\n\n**These rows are not the real meshes:**\n\n"
+                     + "".join(f"- `{k}`: {v}\n" for k, v in sorted(used.items())))
+
+    def close(self) -> None:
+        if hasattr(self.executor, "close"):
+            self.executor.close()
