@@ -144,32 +144,10 @@ def single_thread():
 
 
 def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
-    """Per-ray CPU time {median, min over parts} of tracing ``o, d`` once, the way an application
-    traces its first rays: the first ``warm`` rays are traced untimed (cold caches after the build),
-    then each of ``chunks`` parts of the rest is traced once (repeating the same few rays lets the
-    caches and the branch predictor learn them: up to 2.5x too fast), minus the per-call overhead
-    (the median time of a 1-ray call)."""
-    from tracer.timing import default_clock
-    clock = default_clock()
-    o1, d1 = o[:1].copy(), d[:1].copy()
-    accel.intersect(o1, d1, counters=False)
-    ov = []
-    for _ in range(15):
-        t0 = clock()
-        accel.intersect(o1, d1, counters=False)
-        ov.append(clock() - t0)
-    overhead = float(np.median(ov))
-    warm = min(int(warm), len(o) - 1)
-    if warm > 0:
-        accel.intersect(o[:warm], d[:warm], counters=False)
-    per = []
-    for part in np.array_split(np.arange(warm, len(o)), max(1, chunks)):
-        po, pd_ = np.ascontiguousarray(o[part]), np.ascontiguousarray(d[part])
-        t0 = clock()
-        accel.intersect(po, pd_, counters=False)
-        dt = clock() - t0
-        per.append(max(dt - overhead, 0.25 * dt) / max(len(part), 1))
-    return time_stats(per)
+    """Per-ray time {median, min over parts} of tracing ``o, d`` once with ``accel``
+    (:func:`tracer.timing.time_single_pass`: the way an application traces its first rays)."""
+    from tracer.timing import time_single_pass
+    return time_stats(time_single_pass(lambda po, pd_: accel.intersect(po, pd_, counters=False), o, d, chunks, warm))
 
 
 def probe_grid(grid, rays, sample: int = DEFAULT_SAMPLE, seed: int = 0, idx: np.ndarray | None = None) -> dict:

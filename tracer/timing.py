@@ -136,6 +136,36 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
 
+def time_single_pass(trace: Callable, o: np.ndarray, d: np.ndarray, chunks: int = 1, warm: int = 0,
+                     clock: Callable[[], float] | None = None) -> list[float]:
+    """Per-ray seconds of tracing the rays ``o, d`` once with ``trace(o, d)``, the way an application
+    traces its first rays (repeating the same few rays lets the caches and the branch predictor learn
+    them: up to 2.5x too fast): the first ``warm`` rays are traced untimed (cold caches after a build),
+    then each of ``chunks`` parts of the rest once, minus the per-call overhead (the median time of a
+    1-ray call, floored at a quarter of the part's time). One value per part."""
+    clock = clock or default_clock()
+    _CALLS[0] += 1
+    o1, d1 = o[:1].copy(), d[:1].copy()
+    trace(o1, d1)
+    ov = []
+    for _ in range(15):
+        t0 = clock()
+        trace(o1, d1)
+        ov.append(clock() - t0)
+    overhead = float(np.median(ov))
+    warm = min(int(warm), len(o) - 1)
+    if warm > 0:
+        trace(o[:warm], d[:warm])
+    per = []
+    for part in np.array_split(np.arange(warm, len(o)), max(1, chunks)):
+        po, pd_ = np.ascontiguousarray(o[part]), np.ascontiguousarray(d[part])
+        t0 = clock()
+        trace(po, pd_)
+        dt = clock() - t0
+        per.append(max(dt - overhead, 0.25 * dt) / max(len(part), 1))
+    return per
+
+
 def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[], float] | None = None,
                 min_sample: float = MIN_SAMPLE_SECONDS) -> dict:
     """Time several callables in interleaved rounds (each round times every callable once with

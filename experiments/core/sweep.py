@@ -71,8 +71,8 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
         out.extend(dict(r, **prov) for r in store.get(spec, ignore_force=True)["rows"])
     anchor = _anchor(store, scene, rays_by_kind, out)
     for r in out:  # drift-free time: ratio to the reference x the reference's anchored time
-        r["seconds"] = r["ratio_to_ref"] * anchor[r["worker"]][r["ray_kind"]]
-        r["ns_per_ray"] = r["seconds"] / r["rays"] * 1e9
+        r["anchored_seconds"] = r["ratio_to_ref"] * anchor[r["worker"]][r["ray_kind"]]
+        r["anchored_ns_per_ray"] = r["anchored_seconds"] / r["rays"] * 1e9
     return out
 
 
@@ -81,7 +81,7 @@ def grid_cells(scene, factors) -> list[dict]:
 
 
 def best_row(rows: list[dict]) -> dict:
-    return min(rows, key=lambda r: r["seconds"])
+    return min(rows, key=lambda r: r["anchored_seconds"])
 
 
 def as_arrays(rows, *cols):
@@ -178,4 +178,4 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
 
 def fastest(rows_df, k: int = 3) -> list[float]:
     """Cell counts of the k fastest rows of a (one scene, one ray kind) frame."""
-    return [float(c) for c in rows_df.nsmallest(k, "ns_per_ray").param_cells]
+    return [float(c) for c in rows_df.nsmallest(k, "anchored_ns_per_ray").param_cells]

@@ -84,7 +84,7 @@ def _agree(hits, ref_t, ref_id, rtol=1e-5) -> int:
 def measure_scene(name, args, res, repeats, flat_max, log=print) -> list[dict]:
     from tracer.oracle import oracle_intersect
     from tracer.spd import parse, spd_camera_rays, spd_objects, spd_scene
-    from tracer.timing import time_call
+    from tracer.timing import build_clock, paired_ratio, time_call, time_paired
     family, sf = parse(name)
     scene = spd_scene(name)
     o, d = spd_camera_rays(name, res)
@@ -93,28 +93,41 @@ def measure_scene(name, args, res, repeats, flat_max, log=print) -> list[dict]:
     if exact:
         ref, _ = oracle_intersect(scene, o, d)
         ref_t, ref_id, ref_name = ref.t, ref.tri_id, "oracle"
-    rows = []
+    built = {}
     for kind in STRUCTS:
         if (kind == "sl-flat" and n > flat_max) or (kind == "nogrid" and n > args.nogrid_max):
             continue
-        t0 = time.perf_counter()
+        t0 = build_clock()
         acc = _structure(kind, args).build(scene)
-        build_s = time.perf_counter() - t0
         step = max(1, int(np.ceil(len(o) * n / FLAT_BUDGET))) if kind == "sl-flat" else 1
-        ro, rd = o[::step], d[::step]
+        built[kind] = (acc, build_clock() - t0, o[::step], d[::step], step)
+    # the deciding comparison, lists against the 30^3 grid, timed side by side in interleaved rounds;
+    # the O(N)-per-ray structures once (one timed run is plenty, and they decide nothing)
+    paired = [k for k in ("grid30", "sl-hier") if k in built]
+    tp = time_paired({k: (lambda a=built[k][0], ro=built[k][2], rd=built[k][3]:
+                          a.intersect(ro, rd, counters=False)) for k in paired}, rounds=repeats, repeats=1)
+    rows = []
+    for kind, (acc, build_s, ro, rd, step) in built.items():
         hits, cnt = acc.intersect(ro, rd)
         if not exact and kind == "grid30":
             ref_t, ref_id, ref_name = hits.t.astype(np.float64), hits.tri_id, "grid30"
-        reps = repeats if kind in ("grid30", "sl-hier") else 1  # O(N) per ray: one timed run is plenty
-        tm = time_call(lambda: acc.intersect(ro, rd, counters=False), repeats=reps, warmup=0)
+        if kind in tp:
+            runs = np.asarray(tp[kind])
+            med, spread = float(np.median(runs)), float((runs.max() - runs.min()) / np.median(runs))
+        else:
+            tm = time_call(lambda: acc.intersect(ro, rd, counters=False), repeats=1, warmup=0)
+            med, spread = tm.median, tm.spread
         m = cnt.mean()
         st = acc.stats()
         row = {"scene": name, "family": family, "size_factor": sf, "N": n, "spd_objects": spd_objects(name),
                "structure": kind, "rays": len(ro), "ray_kind": "spd-camera", "hit_frac": float(np.mean(hits.tri_id >= 0)),
                "tests_per_ray": m["tests"], "events_per_ray": m["steps"], "nodes_per_ray": m["nodes"],
-               "skips_per_ray": m["skips"], "max_tests": int(cnt["tests"].max()), "ns_per_ray": tm.median / len(ro) * 1e9,
-               "timing_spread": tm.spread, "build_s": build_s, "memory_bytes": st["memory_bytes"],
+               "skips_per_ray": m["skips"], "max_tests": int(cnt["tests"].max()), "ns_per_ray": med / len(ro) * 1e9,
+               "timing": "paired with grid30/sl-hier" if kind in tp else "one run",
+               "timing_spread": spread, "build_s": build_s, "memory_bytes": st["memory_bytes"],
                "disagreements": _agree(hits, ref_t[::step], ref_id[::step]), "reference": ref_name}
+        if kind == "sl-hier" and "grid30" in tp:
+            row["paired_ratio_to_grid30"] = paired_ratio(tp, "sl-hier", "grid30")[0]
         if kind in ("grid30", "grid30mb", "nogrid"):
             occ = np.diff(acc.cell_start_)
             row.update(refs=int(st["refs"]), occupied_cells=int((occ > 0).sum()),

@@ -67,28 +67,6 @@ QUICK = ["cornell", "boxes-44", "bunny-948", "suzanne", "cylinder-196", "particl
 
 
 # ---------------------------------------------------------------- calibration phase (Hapala Sec 3, steps 1-4)
-def cpu_call(fn, repeats: int = 5, warmup: int = 1, min_sample: float = 0.02) -> list[float]:
-    """Seconds per call of ``fn`` on :func:`tracer.timing.default_clock` (single-threaded runs: the
-    thread's CPU time when the clock check trusts it, unlike wall time not inflated while other
-    processes hold the shared cores), one value per repeat; a sample repeats the call until it lasts
-    ``min_sample`` seconds (like :func:`tracer.timing.time_call`)."""
-    from tracer.timing import default_clock
-    clock = default_clock()
-    for _ in range(warmup):
-        fn()
-    t0 = clock()
-    fn()
-    once = clock() - t0
-    number = max(1, int(np.ceil(min_sample / max(once, 1e-9)))) if once < min_sample else 1
-    runs = []
-    for _ in range(max(1, repeats)):
-        t0 = clock()
-        for _ in range(number):
-            fn()
-        runs.append((clock() - t0) / number)
-    return runs
-
-
 def _timed_build(scene, structure, params, repeats):
     """(structure, build seconds {median, min} of ``repeats`` builds after a warm-up, the structure's
     own build_s). Builds are timed with wall time (:data:`tracer.timing.build_clock`): a library may
@@ -106,15 +84,11 @@ def _timed_build(scene, structure, params, repeats):
 
 
 def paired_times(fns: dict, repeats: int) -> dict:
-    """Per-call CPU time {median, min} of each function over ``repeats`` rounds, the rounds
-    interleaved (a, b, a, b, ...) so that busy phases of a shared machine hit every structure alike."""
-    for fn in fns.values():
-        fn()
-    runs = {k: [] for k in fns}
-    for _ in range(max(1, repeats)):
-        for k, fn in fns.items():
-            runs[k] += cpu_call(fn, repeats=1, warmup=0)
-    return {k: time_stats(v) for k, v in runs.items()}
+    """Per-call time {median, min} of each function over ``repeats`` interleaved rounds
+    (:func:`tracer.timing.time_paired`, one sample per function per round, on the default clock), so
+    that busy phases of a shared machine hit every structure alike."""
+    from tracer.timing import time_paired
+    return {k: time_stats(v) for k, v in time_paired(fns, rounds=repeats, repeats=1).items()}
 
 
 def calibrate_scene(scene, kinds=("random", "path"), n_rays: int = 10_000, samples=SAMPLE_SIZES,

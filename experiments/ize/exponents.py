@@ -88,10 +88,10 @@ def best_m(scene, kind, n_rays, repeats, store, quick, seed) -> tuple[float, pd.
     params = cells_sweep(scene.n, 8 if quick else 14) if kind == "skinny" else \
         grid_cells(scene, QUICK_FACTORS if quick else FULL_FACTORS)
     df = pd.DataFrame(sweep(scene, "grid", params, rays, store, repeats, desc=f"exponents {scene.name}"))
-    m = refine_minimum(df.cells, df.ns_per_ray)
+    m = refine_minimum(df.cells, df.anchored_ns_per_ray)
     df2 = pd.DataFrame(sweep(scene, "grid", [{"cells": float(round(m))}], rays, store, repeats, desc="refine"))
     df = pd.concat([df, df2], ignore_index=True)
-    return float(df.loc[df.ns_per_ray.idxmin()].cells), df
+    return float(df.loc[df.anchored_ns_per_ray.idxmin()].cells), df
 
 
 def main(ctx, args) -> int:

@@ -43,9 +43,9 @@ def main(ctx, args) -> int:
     lines = ["# Figure 2 (Ize 2007): fitted cost curves against measured runtimes", "",
              "| scene | N | equation | Tsetup ns | Ts ns | Ti ns | Ti/Ts | R² | MAPE |", "|---|---|---|---|---|---|---|---|---|"]
     for ax, (scene, n, form, k) in zip(axes[0], panels):
-        g = GridCostFit(form).fit(k.cells, k.ns_per_ray, n)
+        g = GridCostFit(form).fit(k.cells, k.anchored_ns_per_ray, n)
         Ms = np.geomspace(k.cells.min(), k.cells.max(), 200)
-        ax.plot(k.cells, k.ns_per_ray, "o", ms=3, label="measured")
+        ax.plot(k.cells, k.anchored_ns_per_ray, "o", ms=3, label="measured")
         ax.plot(Ms, g.predict(Ms), "-", lw=1, label=f"Eq {'1' if form == 'compact' else '5'} fit")
         ax.set_xscale("log")
         ax.set_title(f"{scene}", fontsize=8)

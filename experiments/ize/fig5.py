@@ -70,7 +70,7 @@ def main(ctx, args) -> int:
         df = pd.DataFrame(sweep(scene, "nested", params, rays, store, repeats, desc=f"fig5 {name}"))
         df["c1"] = [p["c1"] for p in pts]
         df["c2"] = [p["c2"] for p in pts]
-        df["pct_over_best_sweep"] = 100 * (df.ns_per_ray / df.ns_per_ray.min() - 1)
+        df["pct_over_best_sweep"] = 100 * (df.anchored_ns_per_ray / df.anchored_ns_per_ray.min() - 1)
         df["pct_over_best"] = paired_plane(scene, "nested", params, rays["random"], store, quick=args.quick)
         frames.append(df)
         Z = df.pivot(index="c2", columns="c1", values="pct_over_best")

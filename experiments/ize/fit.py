@@ -43,12 +43,12 @@ def main(ctx, args) -> int:
     store = ctx.store()
     rows = sweep(scene, "grid", grid_cells(scene, factors), rays, store, repeats, desc=f"fit {scene.name}")
     df = pd.DataFrame(rows)
-    sel = select_model(df.cells.values, df.ns_per_ray.values, scene.n)
+    sel = select_model(df.cells.values, df.anchored_ns_per_ray.values, scene.n)
     form, setup = {"eq1": ("compact", True), "eq1-no-setup": ("compact", False),
                    "eq5": ("skinny", True), "eq5-no-setup": ("skinny", False)}[sel["chosen"]]
-    g = GridCostFit(form, setup).fit(df.cells, df.ns_per_ray, scene.n)
-    c = CounterCostFit().fit([scene.name] * len(df), df.steps, df.tests, df.ns_per_ray)
-    m_best = refine_minimum(df.cells, df.ns_per_ray)
+    g = GridCostFit(form, setup).fit(df.cells, df.anchored_ns_per_ray, scene.n)
+    c = CounterCostFit().fit([scene.name] * len(df), df.steps, df.tests, df.anchored_ns_per_ray)
+    m_best = refine_minimum(df.cells, df.anchored_ns_per_ray)
     m_pred, m_pred_from = g.optimum(), sel["chosen"]
     if not (np.isfinite(m_pred) and m_pred > 0):  # a fitted Ts at 0 has no finite optimum: say so, use the counters
         m_pred, m_pred_from = 2.0 * scene.n * c.ti_over_ts_, "counter fit (the chosen model's optimum is not finite)"
@@ -56,8 +56,8 @@ def main(ctx, args) -> int:
     extra = pd.DataFrame(sweep(scene, "grid", [{"cells": float(round(m_best))}, {"cells": float(round(m_pred))}],
                                rays, store, repeats, desc="fit check"))
     allrows = pd.concat([df, extra], ignore_index=True)
-    t_best = allrows.ns_per_ray.min()
-    t_pred = float(extra[extra.param_cells == float(round(m_pred))].ns_per_ray.iloc[0])
+    t_best = allrows.anchored_ns_per_ray.min()
+    t_pred = float(extra[extra.param_cells == float(round(m_pred))].anchored_ns_per_ray.iloc[0])
     # the predicted M against the three fastest swept points, timed side by side (paired rounds)
     pp = paired_penalties(scene, "grid", {"pred": {"cells": float(round(m_pred))}},
                           [{"cells": c} for c in fastest(allrows, 3)], rays["random"], store,
@@ -69,7 +69,7 @@ def main(ctx, args) -> int:
         "r2": g.metrics_["r2"], "mape": g.metrics_["mape"], "cond": g.cond_,
         "counter_fit": {"tsetup": c.tsetup_[scene.name], "ts": c.ts_, "ti": c.ti_, "ti_over_ts": c.ti_over_ts_,
                         "ci": c.ci_, "r2": c.metrics_["r2"], "mape": c.metrics_["mape"], "cond": c.cond_},
-        "m_pred": m_pred, "m_pred_from": m_pred_from, "m_best": float(allrows.loc[allrows.ns_per_ray.idxmin()].cells),
+        "m_pred": m_pred, "m_pred_from": m_pred_from, "m_best": float(allrows.loc[allrows.anchored_ns_per_ray.idxmin()].cells),
         "penalty": pp["penalty_pct"], "penalty_range": [pp["min_pct"], pp["max_pct"]],
         "penalty_swept": penalty_pct(t_pred, t_best), "candidates": sel["candidates"],
         "rays": n_rays, "threads": threads, "units": "ns per ray",

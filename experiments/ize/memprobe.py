@@ -73,4 +73,4 @@ def model_ns(rows, costs: dict) -> np.ndarray:
 
 def excess(rows, costs: dict) -> np.ndarray:
     """Measured ns per ray minus the memory-free count model."""
-    return np.asarray(rows.ns_per_ray) - model_ns(rows, costs)
+    return np.asarray(rows.anchored_ns_per_ray) - model_ns(rows, costs)

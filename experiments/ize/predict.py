@@ -40,20 +40,20 @@ def holdout(df: pd.DataFrame, test: str, train: list[str], points: int | None = 
         for _, g in tr.groupby("scene"):
             keep += list(g.index[np.sort(rng.choice(len(g), min(points, len(g)), replace=False))])
         tr = tr.loc[keep]
-    fit = CounterCostFit(n_boot=0).fit(tr.scene.tolist(), tr.steps, tr.tests, tr.ns_per_ray)
+    fit = CounterCostFit(n_boot=0).fit(tr.scene.tolist(), tr.steps, tr.tests, tr.anchored_ns_per_ray)
     te = df[df.scene == test].sort_values("cells")
     work = fit.ts_ * te.steps.values + fit.ti_ * te.tests.values
     if calibrate_setup:  # one measured point of the new scene (its median-M point) fixes Tsetup
         j = len(te) // 2
-        setup = te.ns_per_ray.values[j] - work[j]
+        setup = te.anchored_ns_per_ray.values[j] - work[j]
     else:
         setup = float(np.mean(list(fit.tsetup_.values())))
     pred = setup + work
-    ape = np.abs(pred - te.ns_per_ray.values) / te.ns_per_ray.values
+    ape = np.abs(pred - te.anchored_ns_per_ray.values) / te.anchored_ns_per_ray.values
     i_pred = int(np.argmin(pred))
     return {"scene": test, "train": ",".join(train), "points": points or "all", "mape_pct": float(ape.mean() * 100),
-            "m_pred": float(te.cells.values[i_pred]), "m_best": float(te.cells.values[np.argmin(te.ns_per_ray.values)]),
-            "penalty_pct": float(100 * (te.ns_per_ray.values[i_pred] / te.ns_per_ray.min() - 1)),
+            "m_pred": float(te.cells.values[i_pred]), "m_best": float(te.cells.values[np.argmin(te.anchored_ns_per_ray.values)]),
+            "penalty_pct": float(100 * (te.anchored_ns_per_ray.values[i_pred] / te.anchored_ns_per_ray.min() - 1)),
             "ts": fit.ts_, "ti": fit.ti_, "calibrated_setup": calibrate_setup}
 
 

@@ -66,7 +66,7 @@ def run(ctx, args, log=print) -> dict:
 
     # Ti/Ts on this machine: pooled counter regression over every scene's random-ray sweep
     rnd = df[df.ray_kind == "random"]
-    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
     ratio = cfit.ti_over_ts_
     ratio_ok = bool(np.isfinite(ratio) and ratio > 0 and cfit.ts_ > 0)
     if not ratio_ok:  # an ill-conditioned or noisy fit: say so, use the paper's ratio for the theory column
@@ -75,7 +75,7 @@ def run(ctx, args, log=print) -> dict:
         ratio = IZE_TI_OVER_TS
 
     # does one (Ts, Ti) pair serve all scenes? per-scene constants when the AIC says so
-    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
     scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
 
     # measure the extra points: refined best M and the fitted-theory M, for each scene and kind
@@ -87,7 +87,7 @@ def run(ctx, args, log=print) -> dict:
             pts.add(2.0 * scene.n * scene_ratio[name])
         for kind in KINDS:
             k = sub[sub.ray_kind == kind]
-            pts.add(refine_minimum(k.cells, k.ns_per_ray))
+            pts.add(refine_minimum(k.cells, k.anchored_ns_per_ray))
         extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in sorted(pts)], rays[name], store,
                        repeats, desc=f"table2 {name} (refine)")
     df = pd.concat([df, pd.DataFrame(extra)], ignore_index=True)
@@ -98,10 +98,10 @@ def run(ctx, args, log=print) -> dict:
         entry = {"scene": name, "paper_model": p[1], "N": scene.n, "paper_N": p[2]}
         for kind in KINDS:
             k = df[(df.scene == name) & (df.ray_kind == kind)]
-            best = k.loc[k.ns_per_ray.idxmin()]
+            best = k.loc[k.anchored_ns_per_ray.idxmin()]
             r8 = nearest(k, 8.0 * scene.n)
             rf = nearest(k, 2.0 * scene.n * ratio)
-            g = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
+            g = GridCostFit("compact").fit(k.cells, k.anchored_ns_per_ray, scene.n)
             fits.append({"scene": name, "ray_kind": kind, "tsetup_ns": g.tsetup_, "ts_ns": g.ts_, "ti_ns": g.ti_,
                          "ti_over_ts": g.ti_over_ts_, "ti_over_ts_ci": g.ci_["ti_over_ts"], "r2": g.metrics_["r2"],
                          "mape_pct": g.metrics_["mape"], "cond": g.cond_, "m_pred_eq4": g.optimum()})
@@ -114,7 +114,7 @@ def run(ctx, args, log=print) -> dict:
                                   [{"cells": c} for c in fastest(k, 3)], rays[name][kind], store,
                                   quick=quick)
             entry.update({
-                f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.ns_per_ray,
+                f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.anchored_ns_per_ray,
                 f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": pp["fitted"]["penalty_pct"],
                 f"penalty_fitted_range{suffix}": f"{pp['fitted']['min_pct']:.1f}..{pp['fitted']['max_pct']:.1f}",
                 f"theory_M_8N{suffix}": int(r8.cells), f"penalty_8N_pct{suffix}": pp["8N"]["penalty_pct"],
@@ -122,8 +122,8 @@ def run(ctx, args, log=print) -> dict:
                 f"penalty_scene_pct{suffix}": pp["scene_fit"]["penalty_pct"],
                 f"penalty_scene_range{suffix}": f"{pp['scene_fit']['min_pct']:.1f}..{pp['scene_fit']['max_pct']:.1f}",
                 f"penalty_8N_range{suffix}": f"{pp['8N']['min_pct']:.1f}..{pp['8N']['max_pct']:.1f}",
-                f"penalty_fitted_swept_pct{suffix}": penalty_pct(rf.ns_per_ray, best.ns_per_ray),
-                f"penalty_8N_swept_pct{suffix}": penalty_pct(r8.ns_per_ray, best.ns_per_ray),
+                f"penalty_fitted_swept_pct{suffix}": penalty_pct(rf.anchored_ns_per_ray, best.anchored_ns_per_ray),
+                f"penalty_8N_swept_pct{suffix}": penalty_pct(r8.anchored_ns_per_ray, best.anchored_ns_per_ray),
             })
         entry.update({"paper_empirical_M": p[3], "paper_theory_M": p[4], "paper_penalty_pct": p[5]})
         table.append(entry)
@@ -256,8 +256,8 @@ def _figure(ctx, df, fit_df, scenes, ratio):
     for ax, (name, scene) in zip(axes[0], scenes.items()):
         for kind, mk in (("random", "o"), ("camera", "s")):
             k = df[(df.scene == name) & (df.ray_kind == kind)].sort_values("cells")
-            ax.plot(k.cells / scene.n, k.ns_per_ray, mk, ms=3, label=f"{kind} (measured)")
-            g = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
+            ax.plot(k.cells / scene.n, k.anchored_ns_per_ray, mk, ms=3, label=f"{kind} (measured)")
+            g = GridCostFit("compact").fit(k.cells, k.anchored_ns_per_ray, scene.n)
             Ms = np.geomspace(k.cells.min(), k.cells.max(), 200)
             ax.plot(Ms / scene.n, g.predict(Ms), "-", lw=1, label=f"{kind} Eq 1 fit")
         ax.axvline(8, color="k", ls=":", lw=1, label="M = 8N (paper)")

@@ -62,15 +62,15 @@ def run(ctx, args, log=print) -> dict:
                       desc=f"table3 {name}")
     df = pd.DataFrame(rows)
     rnd = df[df.ray_kind == "random"]
-    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
     ratio = cfit.ti_over_ts_
     # one (Ts, Ti) pair for all cylinders, or one per cylinder? (AIC, as table2)
-    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.ns_per_ray)
+    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
     scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
     extra = []
     for name, scene in scenes.items():
         k = df[(df.scene == name) & (df.ray_kind == "random")]
-        pts = [refine_minimum(k.cells, k.ns_per_ray), (scene.n * ratio) ** 1.5]
+        pts = [refine_minimum(k.cells, k.anchored_ns_per_ray), (scene.n * ratio) ** 1.5]
         if np.isfinite(scene_ratio[name]) and scene_ratio[name] > 0:
             pts.append((scene.n * scene_ratio[name]) ** 1.5)
         extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in pts], rays[name], store, repeats,
@@ -83,12 +83,12 @@ def run(ctx, args, log=print) -> dict:
         e = {"scene": name, "N": scene.n, **_memory_split(df, scene, rays[name]["random"], quick)}
         for kind in KINDS:
             k = df[(df.scene == name) & (df.ray_kind == kind)]
-            best = k.loc[k.ns_per_ray.idxmin()]
+            best = k.loc[k.anchored_ns_per_ray.idxmin()]
             th = nearest(k, 8.0 * scene.n**1.5)
             fi = nearest(k, (scene.n * ratio) ** 1.5)
             lin = nearest(k, 8.0 * scene.n)
-            g = GridCostFit("skinny").fit(k.cells, k.ns_per_ray, scene.n)
-            g1 = GridCostFit("compact").fit(k.cells, k.ns_per_ray, scene.n)
+            g = GridCostFit("skinny").fit(k.cells, k.anchored_ns_per_ray, scene.n)
+            g1 = GridCostFit("compact").fit(k.cells, k.anchored_ns_per_ray, scene.n)
             fits.append({"scene": name, "ray_kind": kind, "eq5_mape_pct": g.metrics_["mape"], "eq5_r2": g.metrics_["r2"],
                          "eq5_ti_over_ts": g.ti_over_ts_, "eq1_mape_pct": g1.metrics_["mape"], "eq1_r2": g1.metrics_["r2"],
                          "eq5_m_pred": g.optimum()})
@@ -103,7 +103,7 @@ def run(ctx, args, log=print) -> dict:
                                   quick=quick, others={"8N": ("grid", {"cells": float(lin.param_cells)})})
             e.update({f"empirical_M{sfx}": int(best.cells), f"theory_M{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["theory"]["penalty_pct"],
-                      f"penalty_swept_pct{sfx}": penalty_pct(th.ns_per_ray, best.ns_per_ray),
+                      f"penalty_swept_pct{sfx}": penalty_pct(th.anchored_ns_per_ray, best.anchored_ns_per_ray),
                       f"fitted_M{sfx}": int(fi.cells), f"penalty_fitted_pct{sfx}": pp["fitted"]["penalty_pct"],
                       f"scene_ti_over_ts{sfx}": sr, f"scene_fit_M{sfx}": int(fs.cells),
                       f"penalty_scene_pct{sfx}": pp["scene_fit"]["penalty_pct"],
@@ -197,7 +197,7 @@ def _memory_split(df, scene, random_rays, quick) -> dict:
     c = memprobe.memory_free_costs(scene, random_rays, quick=quick)
     k = df[(df.scene == scene.name) & (df.ray_kind == "random")].drop_duplicates("cells")
     model = memprobe.model_ns(k, c)
-    best, th = k.loc[k.ns_per_ray.idxmin()], nearest(k, 8.0 * scene.n**1.5)
+    best, th = k.loc[k.anchored_ns_per_ray.idxmin()], nearest(k, 8.0 * scene.n**1.5)
     ex = dict(zip(k.cells, memprobe.excess(k, c)))
     mod = dict(zip(k.cells, model))
     return {**c, "eq8_M_probed": (scene.n * c["ti_over_ts"]) ** 1.5, "model_opt_M": int(k.cells.iloc[np.argmin(model)]),
@@ -232,10 +232,10 @@ def _figure(ctx, df, scenes):
     fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 2.8), squeeze=False)
     for ax, (name, scene) in zip(axes[0], scenes.items()):
         k = df[(df.scene == name) & (df.ray_kind == "random")].sort_values("cells")
-        ax.plot(k.cells, k.ns_per_ray, "o", ms=3, label="measured (random rays)")
+        ax.plot(k.cells, k.anchored_ns_per_ray, "o", ms=3, label="measured (random rays)")
         Ms = np.geomspace(k.cells.min(), k.cells.max(), 200)
         for form, ls in (("skinny", "-"), ("compact", ":")):
-            g = GridCostFit(form).fit(k.cells, k.ns_per_ray, scene.n)
+            g = GridCostFit(form).fit(k.cells, k.anchored_ns_per_ray, scene.n)
             ax.plot(Ms, g.predict(Ms), ls, lw=1, label=f"Eq {'5' if form == 'skinny' else '1'} fit")
         ax.axvline(8 * scene.n**1.5, color="r", ls="--", lw=1, label="8N^1.5")
         ax.axvline(8 * scene.n, color="k", ls=":", lw=1, label="8N")

@@ -61,7 +61,7 @@ def run(ctx, args, log=print) -> dict:
         rays = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
         two = pd.DataFrame(sweep(scene, "nested", m1_sweep(scene.n, quick), rays, store, repeats, desc=f"table4 {name}"))
         r = two[two.ray_kind == "random"]
-        best_m1 = refine_minimum(r.param_m1, r.ns_per_ray)
+        best_m1 = refine_minimum(r.param_m1, r.anchored_ns_per_ray)
         theory = float(round((8.0 * scene.n) ** 0.6))
         two = pd.concat([two, pd.DataFrame(sweep(scene, "nested", [{"levels": 2, "m1": float(round(best_m1)), "m2_factor": 8.0},
                                                                      {"levels": 2, "m1": theory, "m2_factor": 8.0}],
@@ -76,12 +76,12 @@ def run(ctx, args, log=print) -> dict:
         for kind in KINDS:
             k2 = two[two.ray_kind == kind]
             k1 = one[one.ray_kind == kind]
-            best = k2.loc[k2.ns_per_ray.idxmin()]
+            best = k2.loc[k2.anchored_ns_per_ray.idxmin()]
             th = k2[k2.param_m1 == theory].iloc[0]
             sfx = "" if kind == "random" else f"_{kind}"
             # the theory's M1 re-timed side by side with the three fastest swept M1 (paired rounds)
-            top = k2.drop_duplicates("param_m1").nsmallest(3, "ns_per_ray").param_m1
-            one_best = {"cells": float(k1.loc[k1.ns_per_ray.idxmin()].param_cells)}
+            top = k2.drop_duplicates("param_m1").nsmallest(3, "anchored_ns_per_ray").param_m1
+            one_best = {"cells": float(k1.loc[k1.anchored_ns_per_ray.idxmin()].param_cells)}
             pp = paired_penalties(scene, "nested", {"theory": {"levels": 2, "m1": theory, "m2_factor": 8.0}},
                                   [{"levels": 2, "m1": float(m), "m2_factor": 8.0} for m in top], rays[kind], store,
                                   quick=quick, others={"one_level": ("grid", one_best)})["theory"]
@@ -89,10 +89,10 @@ def run(ctx, args, log=print) -> dict:
                       f"theory_total_cells{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["penalty_pct"],
                       f"penalty_range{sfx}": f"{pp['min_pct']:.1f}..{pp['max_pct']:.1f}",
-                      f"penalty_swept_pct{sfx}": penalty_pct(th.ns_per_ray, best.ns_per_ray),
+                      f"penalty_swept_pct{sfx}": penalty_pct(th.anchored_ns_per_ray, best.anchored_ns_per_ray),
                       f"speedup_vs_best_one_level{sfx}": pp["speedup"]["one_level"],
-                      f"speedup_swept{sfx}": k1.ns_per_ray.min() / th.ns_per_ray,
-                      f"best_one_level_M{sfx}": int(k1.loc[k1.ns_per_ray.idxmin()].cells)})
+                      f"speedup_swept{sfx}": k1.anchored_ns_per_ray.min() / th.anchored_ns_per_ray,
+                      f"best_one_level_M{sfx}": int(k1.loc[k1.anchored_ns_per_ray.idxmin()].cells)})
         e.update({"paper_N": p[1], "paper_empirical_total_cells": p[2], "paper_theory_total_cells": p[3],
                   "paper_penalty_pct": p[4], "paper_speedup": PAPER_SPEEDUP.get(name)})
         table.append(e)
@@ -150,7 +150,7 @@ def _figure(ctx, df, tab):
     for ax, (_, r) in zip(axes[0], tab.iterrows()):
         for kind, mk in (("random", "o"), ("camera", "s")):
             k = df[(df.scene == r.scene) & (df.ray_kind == kind) & (df.structure == "nested")].sort_values("M1")
-            ax.plot(k.M1, k.ns_per_ray, mk + "-", ms=3, lw=0.8, label=kind)
+            ax.plot(k.M1, k.anchored_ns_per_ray, mk + "-", ms=3, lw=0.8, label=kind)
         ax.axvline(r.theory_M1, color="r", ls="--", lw=1, label="(8N)^0.6")
         ax.set_xscale("log")
         ax.set_title(f"{r.scene} (N = {r.N:,})", fontsize=8)

@@ -26,7 +26,7 @@ from experiments.core.common import progress
 from tracer.packet import CoherentGrid
 from tracer.rays import camera_rays
 from tracer.scene import load_scene
-from tracer.timing import set_threads, time_call
+from tracer.timing import set_threads, time_paired
 
 LAMBDAS = (0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0)
 QUICK_LAMBDAS = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
@@ -81,7 +81,7 @@ def _row(scene, params: dict, cgt, rays, seconds: list, spread: float) -> dict:
 
 def measure_points(store, target: str, scene, param_list, side, repeats, threads, log) -> list[dict]:
     """Time every parameter set on one scene not in the point store yet: build all, then
-    ``repeats`` interleaved rounds of :func:`tracer.timing.time_call` samples (a warm-up call
+    ``repeats`` interleaved rounds (:func:`tracer.timing.time_paired`: a warm-up call
     first), so a burst of load on a shared machine hits every point alike; per point the median
     of the rounds. Camera rays in k x k tile order; the counted work of the same rays."""
     keys = [{"target": target, "scene": scene.name, "params": p, "side": side, "repeats": repeats,
@@ -89,11 +89,9 @@ def measure_points(store, target: str, scene, param_list, side, repeats, threads
     todo = [(k, p) for k, p in zip(keys, param_list) if store.get(k) is None]
     if todo:
         built = [(CoherentGrid(**p).build(scene), camera(scene, side, p.get("packet", 8))) for _, p in todo]
-        fns = [lambda c=c, r=r: c.intersect(r.origins, r.directions, counters=False) for c, r in built]
-        samples = [[] for _ in todo]
-        for rnd in range(repeats):
-            for j, fn in enumerate(fns):
-                samples[j].append(time_call(fn, repeats=1, warmup=1 if rnd == 0 else 0).median)
+        tp = time_paired({j: (lambda c=c, r=r: c.intersect(r.origins, r.directions, counters=False))
+                          for j, (c, r) in enumerate(built)}, rounds=repeats, repeats=1)
+        samples = [tp[j] for j in range(len(built))]
         for (key, params), (cgt, rays), sec in zip(todo, built, samples):
             row = store.put(key, _row(scene, params, cgt, rays, sec, (max(sec) - min(sec)) / float(np.median(sec))))
             log(f"  {scene.name} {params}: {row['ns_per_ray']:.1f} ns/ray")
