@@ -14,6 +14,7 @@ import sympy as sp
 from scipy.optimize import minimize, minimize_scalar
 
 from costmodel import derive as d
+from costmodel import derive_nested as dn
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -70,7 +71,7 @@ def test_two_level_m2_is_one_level_grid_of_subgrid_points():
 
 @pytest.mark.parametrize("levels", [1, 2, 3, 4, 5])
 def test_d_level_top_exponent(levels):
-    r = d.ize_eq16_d_level_top(levels)
+    r = dn.ize_eq16_d_level_top(levels)
     assert r.exponent == sp.Rational(3, 2 * levels + 1)
     assert r.time_exponent == sp.Rational(1, 2 * levels + 1)
     assert r.space_exponent == 1
@@ -80,31 +81,31 @@ def test_d_level_top_exponent(levels):
 
 
 def test_d_level_general_and_three_level():
-    g = d.ize_d_level_general()
+    g = dn.ize_d_level_general()
     assert sp.simplify(g.exponent - 3 / (2 * d.L + 1)) == 0
     assert all(g.checks.values()), g.checks
-    t = d.ize_eq15_three_level()
+    t = dn.ize_eq15_three_level()
     assert t.exponent == sp.Rational(3, 7) and t.formula_match
     assert all(t.checks.values()), t.checks
-    m2 = d.ize_three_level_m2()
+    m2 = dn.ize_three_level_m2()
     assert m2.exponent == sp.Rational(1, 7) and m2.checks["m2_is_eq12_applied_to_subgrid"]
 
 
 def test_scattered_two_level():
-    r = d.ize_scattered_two_level()
+    r = dn.ize_scattered_two_level()
     assert r.space_exponent == sp.Rational(6, 5) and r.time_exponent == sp.Rational(2, 5)
     assert r.match and all(r.checks.values())
 
 
 def test_two_level_long_skinny_eq17_matches_eq18_does_not():
-    r17 = d.ize_eq17_two_level_long_skinny()
+    r17 = dn.ize_eq17_two_level_long_skinny()
     assert r17.exponent == 1 and r17.formula_match  # M1 = k N Ti / Ts
     assert r17.time_exponent == sp.Rational(1, 3)
     assert r17.second_order_positive
     assert all(r17.checks.values()), r17.checks
-    m2 = d.ize_eq17_two_level_long_skinny_m2()
+    m2 = dn.ize_eq17_two_level_long_skinny_m2()
     assert m2.exponent == sp.Rational(3, 2) and m2.checks["M2_is_eq8_of_N2_lines"]
-    r18 = d.ize_eq18_two_level_long_skinny_space()
+    r18 = dn.ize_eq18_two_level_long_skinny_space()
     assert r18.exponent == sp.Rational(5, 3) and r18.paper == sp.Rational(1, 3)
     assert r18.match is False and "DISCREPANCY" in r18.note
 
@@ -137,7 +138,7 @@ def test_derived_optimum_minimises_long_skinny_time():
 
 
 @pytest.mark.parametrize("fn,result", [(d.two_level_time, d.ize_eq13_two_level_optimum),
-                                       (d.two_level_long_skinny_time, d.ize_eq17_two_level_long_skinny)])
+                                       (dn.two_level_long_skinny_time, dn.ize_eq17_two_level_long_skinny)])
 def test_derived_two_level_optimum_minimises_time(fn, result):
     N, k, Tsetup, Ts, Ti = 2.0e5, 1.7, 7.0, 1.0, 4.0
     res = minimize(lambda x: fn(math.exp(x[0]), math.exp(x[1]), N, k, Tsetup, Ts, Ti), x0=[5.0, 3.0],
@@ -150,7 +151,7 @@ def test_derived_two_level_optimum_minimises_time(fn, result):
 
 
 def test_report_shape_and_values():
-    rep = d.report()
+    rep = dn.report()
     models = rep["models"]
     expected = {"one_level": "1", "long_skinny": "3/2", "two_level_m1": "3/5", "two_level_m2": "1",
                 "three_level_m1": "3/7", "scattered_two_level": "6/5", "two_level_long_skinny_m1": "1",

@@ -95,7 +95,7 @@ def render_markdown(report: dict) -> str:
 
 
 def main(ctx, args) -> int:
-    from costmodel.derive import report as derive_report
+    from costmodel.derive_nested import report as derive_report
 
     rep = derive_report()
     outdir = os.path.join(getattr(args, "out", None) or "results", "derive")
