@@ -17,7 +17,9 @@ origin on a slab plane with a zero direction as inside); the nearer hit child is
 and the other pushed with its entry distance on a fixed-size stack (one per chunk of rays), and
 popped entries beyond the closest hit are dropped. Box/hit comparisons are widened by ``tol``
 (T_EPS = 2e-6 of the ray's t scale) so rounding never loses a hit, also not the hits
-:func:`tracer.geometry.ray_triangle` accepts just outside a triangle (float32-level rounding).
+:func:`tracer.geometry.ray_triangle` accepts on a triangle's very edge. The ray is widened to
+float64 with ``np.float64`` and passed to ray_triangle exactly as the grid and the oracle pass it
+(float32 vertices), so a hit's t is bit-identical to the oracle's.
 Counters: ``setups`` 1 per ray meeting the root box, ``nodes`` nodes visited (entered), ``steps``
 leaves visited, ``tests`` triangle tests.
 """
@@ -237,20 +239,18 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
     six = np.uintp(6)
     seven = np.uintp(7)
     for i in range(lo, hi):
-        # the ray exactly as the oracle passes it to ray_triangle, and in float64 for the boxes
-        ox = float(O[i, 0])
-        oy = float(O[i, 1])
-        oz = float(O[i, 2])
-        dx = float(D[i, 0])
-        dy = float(D[i, 1])
-        dz = float(D[i, 2])
-        px = np.float64(ox)
-        py = np.float64(oy)
-        pz = np.float64(oz)
-        ix = 1.0 / np.float64(dx)
-        iy = 1.0 / np.float64(dy)
-        iz = 1.0 / np.float64(dz)
-        best = float(tmax[i])
+        # the ray exactly as the grid and the oracle pass it to ray_triangle (and use it for the
+        # boxes): widened with np.float64, as Numba's float() keeps a float32 a float32
+        px = np.float64(O[i, 0])
+        py = np.float64(O[i, 1])
+        pz = np.float64(O[i, 2])
+        dx = np.float64(D[i, 0])
+        dy = np.float64(D[i, 1])
+        dz = np.float64(D[i, 2])
+        ix = 1.0 / dx
+        iy = 1.0 / dy
+        iz = 1.0 / dz
+        best = np.float64(tmax[i])
         best_id = -1
         nvis = 0
         leaves = 0
@@ -259,7 +259,7 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
         sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
         sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
         # robust miss test against the padded root box (finite t-range for tol)
-        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, np.float64(best))
+        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, best)
         in_box = t0 <= t1
         if in_box:
             tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
@@ -276,7 +276,7 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
                     for rr in range(off, off + cnt):
                         r = np.uintp(rr)
                         tests += 1
-                        t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                        t = ray_triangle(px, py, pz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
                                          tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
                                          tmin, best)
                         if t < best:

@@ -27,12 +27,17 @@ the same memory. ``tri_ids_`` (refs) holds the scene's triangle indices in leaf 
 ``tri_verts_`` (refs, 9) float32 the triangles copied in that order.
 
 Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
-per block of BLOCK rays), early exit once the closest hit lies before the next node's t-range;
-the any-hit variant (``IntersectP``) stops at the first hit. The near/far choice is branch-free.
+per block of BLOCK rays); a popped node whose t-range starts after the closest hit is skipped
+(pbrt stops there, but the stack is not ordered by entry t: a ray lying in a split plane pushes
+the above child with the parent's whole t-range, beneath entries of the below subtree that start
+later — stopping lost nearer hits there, e.g. on meshes far from the origin, where float32 rays
+often lie exactly in split planes); the any-hit variant (``IntersectP``) stops at the first hit.
+The near/far choice is branch-free. The ray is widened to float64 with ``np.float64`` (Numba's
+``float()`` keeps a float32 a float32) and passed to :func:`tracer.geometry.ray_triangle` exactly
+as the grid and the oracle pass it, so a hit's t is bit-identical to the oracle's.
 Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
 widened by ``tol`` = T_EPS (2e-6) of the ray's t scale, so rounding can only add node visits,
-never lose a hit — including hits that :func:`tracer.geometry.ray_triangle` accepts just outside
-a triangle (it rounds like float32 arithmetic: Numba's ``float()`` keeps float32 as float32).
+never lose a hit — including hits that ray_triangle accepts on a triangle's very edge.
 Counters: ``setups`` 1 per ray meeting the root box, ``steps`` leaves visited (empty ones too),
 ``tests`` triangle tests, ``nodes`` nodes visited (interior + leaf) — pbrt's visits exactly.
 """
@@ -54,7 +59,7 @@ from tracer.geometry import INF, ray_triangle
 from tracer.memory import check_budget
 
 #: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
-#: float32-level rounding of ray_triangle's barycentric test (hits ~1e-7 outside a triangle)
+#: rounding of plane distances and of ray_triangle's edge test (hits on a triangle's very edge)
 T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 LEAF = 3
@@ -375,23 +380,24 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
     bz1 = box[5]
     one = np.uintp(1)
     for i in range(lo, hi):
-        # the ray exactly as the oracle passes it to ray_triangle
-        ox = float(O[i, 0])
-        oy = float(O[i, 1])
-        oz = float(O[i, 2])
-        dx = float(D[i, 0])
-        dy = float(D[i, 1])
-        dz = float(D[i, 2])
-        best = float(tmax[i])
+        # the ray exactly as the grid and the oracle pass it to ray_triangle: widened to float64
+        # with np.float64 (Numba's float() keeps a float32 a float32), tv entries as float32
+        ox = np.float64(O[i, 0])
+        oy = np.float64(O[i, 1])
+        oz = np.float64(O[i, 2])
+        dx = np.float64(D[i, 0])
+        dy = np.float64(D[i, 1])
+        dz = np.float64(D[i, 2])
+        best = np.float64(tmax[i])
         best_id = -1
         nvis = 0
         leaves = 0
         tests = 0
-        ix = 1.0 / np.float64(dx)
-        iy = 1.0 / np.float64(dy)
-        iz = 1.0 / np.float64(dz)
+        ix = 1.0 / dx
+        iy = 1.0 / dy
+        iz = 1.0 / dz
         # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
-        t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, np.float64(best))
+        t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, best)
         t0, t1 = _slab_clip(by0, by1, oy, iy, t0, t1)
         t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
         in_box = t0 <= t1
@@ -412,8 +418,20 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
             ntmin = t0
             ntmax = t1
             while True:
-                if best < ntmin - tol:  # the closest hit lies before this node: done
-                    break
+                if best < ntmin - tol:
+                    # the closest hit lies before this node: skip it, and go on with the next
+                    # pending one. Not done: the todo stack is not ordered by entry t. A ray in a
+                    # split plane (d == 0, o == split) pushes the above child with the parent's
+                    # whole range, under the entries the below child's subtree pushes later with
+                    # larger entry t; and tol lets a child's entry t exceed its sibling's.
+                    if sp == 0:
+                        break
+                    sp -= 1
+                    spu = np.uintp(sp)
+                    node = sn[spu]
+                    ntmin = s0[spu]
+                    ntmax = s1[spu]
+                    continue
                 nvis += 1
                 if node >= 0:
                     nu = np.uintp(2 * node)

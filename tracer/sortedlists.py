@@ -368,7 +368,7 @@ def sl_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, cs, slot_tri, slot_node, 
         t1 = min(t1, tb)
     if t0 > t1 or t1 < tmin or t0 > tmax:
         return INF, -1, 1, 0, 0, 0, 0
-    best = float(tmax)
+    best = np.float64(tmax)
     best_id = -1
     tcur = max(t0, tmin)
     steps = 0
@@ -490,8 +490,11 @@ def sl_chunk(lo, hi, O, D, tmin, tmax, anyhit, cs, slot_tri, slot_node, nbox, tv
     """Trace rays lo..hi with one set of scratch buffers (arrays are passed once per chunk)."""
     for i in range(lo, hi):
         t, tid, su, stp, te, nv, sk = sl_ray(
-            float(O[i, 0]), float(O[i, 1]), float(O[i, 2]), float(D[i, 0]), float(D[i, 1]), float(D[i, 2]),
-            tmin, float(tmax[i]), anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
+            # widened as the grid and the oracle widen the ray (Numba's float() keeps a float32 a
+            # float32), so ray_triangle runs on the same float64 inputs and t is bit-identical
+            np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+            np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]),
+            tmin, np.float64(tmax[i]), anyhit, cs, slot_tri, slot_node, nbox, tv, ev_val, ev_code,
             st, pend, hp, h_t, h_in, c_pos, c_end, c_slot, c_ax, org, inv, mode)
         store_ray(out_t, out_id, counters, i, t, tid, su, stp, te, nv, sk)
 
