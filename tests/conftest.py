@@ -161,3 +161,74 @@ def assert_cli_error(proc, path) -> str:
 def cli_error():
     """:func:`assert_cli_error` as a fixture."""
     return assert_cli_error
+
+
+# ---------------------------------------------------------------- exact oracle agreement, far meshes
+def assert_agrees_exactly(hits, ref, ties, what=None) -> dict:
+    """The oracle contract for a structure that calls :func:`tracer.geometry.ray_triangle` as the
+    oracle does (ray widened to float64 with ``np.float64``, float32 vertices, float64 tmin/tmax):
+    no disagreement by :func:`tracer.oracle.compare` (hit/miss, id, t), and where the structure
+    returns the oracle's triangle its t is *bit-identical*: the structure's float32 t is the
+    oracle's float64 t rounded, with no tolerance — the same function on the same inputs.
+
+    A different triangle is accepted only as a tie (``compare``: the oracle saw another triangle at
+    its t — duplicate faces, shared edges and vertices). There the t comes from other vertices, so
+    it may differ in its last bits: the oracle counts a tie within 1e-9 relative of its t, which
+    after rounding to float32 is at most one float32 ulp — the tolerance of that case, and only of
+    that case. Returns ``compare``'s counts."""
+    import numpy as np
+
+    from tracer.oracle import compare
+
+    res = compare(hits, ref, ties)
+    assert res["disagreements"] == 0, (what, res)
+    hit = hits.tri_id >= 0
+    assert np.all(np.isinf(hits.t[~hit])), (what, "a miss has a finite t")
+    ref32 = ref.t.astype(np.float32)
+    same = hit & (hits.tri_id == ref.tri_id)
+    bad = np.flatnonzero(same & (hits.t != ref32))
+    assert len(bad) == 0, (what, f"{len(bad)} hits on the oracle's triangle with another t", bad[:10].tolist(),
+                           hits.t[bad[:5]].tolist(), ref.t[bad[:5]].tolist())
+    tie = hit & ~same
+    far = np.abs(hits.t[tie].astype(np.float64) - ref32[tie]) > np.spacing(np.abs(ref32[tie])).astype(np.float64)
+    assert not far.any(), (what, "a tie more than one float32 ulp from the oracle's t",
+                           np.flatnonzero(tie)[far][:10].tolist())
+    return res
+
+
+@pytest.fixture(scope="session")
+def agrees_exactly():
+    """:func:`assert_agrees_exactly` as a fixture."""
+    return assert_agrees_exactly
+
+
+def transformed_scene(scene, scale: float = 1.0, shift: float = 0.0):
+    """``scene`` normalised to unit size (largest extent 1, minimum corner at the origin), then
+    scaled by ``scale`` and translated by ``shift`` on every axis, in float64, rounded once to
+    float32: e.g. (1, 1e5) is a unit mesh 1e5 from the origin, where float32 coordinates are
+    1/128 apart and float32 rays often lie exactly in the planes of the mesh's vertices."""
+    import numpy as np
+
+    from tracer.scene import Scene
+
+    v = scene.tris.astype(np.float64)
+    lo = v.reshape(-1, 3).min(axis=0)
+    ext = float((v.reshape(-1, 3).max(axis=0) - lo).max()) or 1.0
+    tris = ((v - lo) / ext * scale + shift).astype(np.float32)
+    return Scene(tris, f"{scene.name}@x{scale:g}+{shift:g}")
+
+
+_FAR: dict = {}
+
+
+@pytest.fixture(scope="session")
+def far_scene(load):
+    """``far_scene(name, scale, shift)``: :func:`transformed_scene` of a named scene, once per session."""
+
+    def _far(name: str, scale: float = 1.0, shift: float = 0.0):
+        key = (name, float(scale), float(shift))
+        if key not in _FAR:
+            _FAR[key] = transformed_scene(load(name), scale, shift)
+        return _FAR[key]
+
+    return _far

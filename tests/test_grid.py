@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from conftest import assert_agrees_exactly
 
 from tracer.accel import COUNTER_NAMES, Hits, build
 from tracer.errors import GridcostError
@@ -48,8 +49,8 @@ def test_grid_agrees_with_oracle(small_scene, kind, variant):
     rays = rays_for(scene, kind)
     hits, counters = grid.intersect(rays.origins, rays.directions)
     ref, ties = oracle_for(scene, rays)
-    res = compare(hits, ref, ties)
-    assert res["disagreements"] == 0, (res, scene.name, kind, variant)
+    # the grid calls ray_triangle as the oracle does: t bit-identical on the oracle's triangle
+    res = assert_agrees_exactly(hits, ref, ties, (scene.name, kind, variant))
     assert res["rays"] == rays.n
     if kind in ("camera", "random", "adversarial"):
         assert res["hits"] > 0
@@ -66,6 +67,47 @@ def test_grid_agrees_with_oracle(small_scene, kind, variant):
     assert (hits.tri_id[counters["setups"] == 0] == -1).all()
     if not grid.mailbox:
         assert (counters["skips"] == 0).all()
+
+
+#: macrocell block sizes (``macro`` = K: blocks of K^3 cells) and the cell counts (per triangle)
+#: they are tried at: the default grid, and a fine one where most blocks are empty
+MACROS = (2, 4)
+MACRO_FACTORS = (None, 16)
+
+
+@pytest.mark.parametrize("factor", MACRO_FACTORS)
+@pytest.mark.parametrize("macro", MACROS)
+@pytest.mark.parametrize("kind", KINDS)
+def test_macrocell_grid_agrees_with_oracle(small_scene, kind, macro, factor):
+    """The macrocell layer (empty K^3 blocks jumped over, the DDA set up again at the block's exit)
+    against the oracle on every ray kind, with and without mailboxing: the same hits, bit for bit,
+    as the oracle and as the grid without macrocells, and real jumps taken."""
+    scene = small_scene
+    rays = rays_for(scene, kind)
+    ref, ties = oracle_for(scene, rays)
+    plain = UniformGrid(factor=factor).build(scene)
+    base, _ = plain.intersect(rays.origins, rays.directions, counters=False)
+    jumps = 0
+    empty_blocks = 0
+    for mailbox in (False, True):
+        grid = build(scene, "grid", macro=macro, factor=factor, mailbox=mailbox)
+        assert grid.macro == macro and grid.stats()["cells"] == plain.stats()["cells"]
+        empty_blocks = int((grid.macro_ == 0).sum())
+        hits, counters = grid.intersect(rays.origins, rays.directions)
+        assert_agrees_exactly(hits, ref, ties, (scene.name, kind, macro, factor, mailbox))
+        np.testing.assert_array_equal(hits.tri_id, base.tri_id)
+        np.testing.assert_array_equal(hits.t, base.t)
+        fast, none = grid.intersect(rays.origins, rays.directions, counters=False)
+        assert none is None
+        np.testing.assert_array_equal(fast.tri_id, hits.tri_id)
+        np.testing.assert_array_equal(fast.t, hits.t)
+        jumps += int(counters.total()["nodes"])  # counter "nodes" = macrocell jumps
+        # any hit: occluded just past the closest hit, never on a miss
+        hit = ref.tri_id >= 0
+        tmax = np.where(hit, ref.t * (1 + 1e-5) + 1e-12, np.inf).astype(np.float32)
+        np.testing.assert_array_equal(grid.occluded(rays.origins, rays.directions, tmax), hit)
+    if factor is not None and kind != "camera" and empty_blocks > 0.1 * len(grid.macro_):
+        assert jumps > 0  # the fine grid has empty blocks, and rays jump over them
 
 
 def test_hits_format(bunny):
@@ -96,8 +138,7 @@ def test_grid_agrees_at_other_resolutions(bunny, variant):
     for kw in (dict(factor=1), dict(factor=64), dict(rule="pbrt"), dict(rule="wald"), dict(res=(1, 1, 1)),
                dict(res=(7, 3, 11))):
         hits, _ = UniformGrid(**kw, **VARIANTS[variant]).build(bunny).intersect(rays.origins, rays.directions)
-        res = compare(hits, ref, ties)
-        assert res["disagreements"] == 0, (kw, res)
+        assert_agrees_exactly(hits, ref, ties, kw)
 
 
 def test_flat_single_triangle_scene():
