@@ -95,6 +95,7 @@ def _run_target(name: str, ctx, args) -> int:
     ctx.start_target()
     rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
     ctx.mark_stand_ins(ctx.out / name / "summary.md")
+    ctx.mark_hosts(ctx.out / name / "summary.md")
     if name != "verify" and ctx.out.is_dir():
         write_index(ctx.out, ctx.fig_dir)
     return rc

@@ -63,6 +63,21 @@ class RunContext:
         return PointStore(out or self.out, force=self.force, code=code, reuse_stale=self.reuse_stale,
                           ledger=self.ledger, ctx=self)
 
+    def run_task(self, store: PointStore, fn, *args):
+        """Measure ``fn(*args)`` through the run's executor (here, or as one Dask task on one worker)
+        and return (result, provenance of the measurement: host and clock). A worker that measured
+        with another measurement key than ``store``'s (other code, threads, clock, CPU) is refused."""
+        from tracer.errors import GridcostError
+        mine = store.measurement_key
+        result, theirs, host = self.executor.run_task(fn, args, mine["threads"], store.code)
+        prov = {"host": host, "clock": mine["clock"]}
+        if theirs is not None:  # measured on a worker: the ledger hears of it here (the local clock did not)
+            if theirs != mine:
+                raise GridcostError(f"worker {host} measured with another measurement key ({theirs}) than this run "
+                                    f"({mine}): same code, threads, clock and CPU needed")
+            self.ledger.add(dict(self.ledger.now(), **prov))
+        return result, prov
+
     # ------------------------------------------------------------ writers
     def write_csv(self, path, df: pd.DataFrame) -> Path:
         """Write ``df`` atomically; rows without provenance columns (``commit``, ``host``,
@@ -99,6 +114,16 @@ class RunContext:
     def finish_figure(self, fig, name: str) -> list[Path]:
         """Lay out, save (PNG + PDF into this run's figure directory) and close ``fig``."""
         return finish_figure(fig, name, self.fig_dir)
+
+    def mark_hosts(self, summary_path) -> None:
+        """A summary built from points measured on several hosts says so."""
+        hosts = sorted({str(o["host"]) for o in self.ledger.sources()})
+        path = Path(summary_path)
+        if len(hosts) > 1 and path.exists() and "## Hosts" not in path.read_text():
+            atomic_write(path, path.read_text().rstrip("\n") + "\n\n## Hosts\n\nThe numbers above were measured on "
+                         f"{len(hosts)} hosts ({', '.join(hosts)}); every curve's reference time is per host, so "
+                         "curves never mix machines, but absolute times of different hosts are not comparable "
+                         "(the `host` column of each CSV row says which measured it).\n")
 
     def mark_stand_ins(self, summary_path) -> None:
         """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""

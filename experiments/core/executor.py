@@ -24,6 +24,8 @@ def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
     from tracer.timing import MIN_SAMPLE_SECONDS, set_threads
     if spec.get("models"):
         os.environ["GRIDCOST_MODELS"] = spec["models"]
+    if spec.get("clock_env"):
+        os.environ["GRIDCOST_CLOCK"] = spec["clock_env"]
     if spec.get("threads"):
         set_threads(spec["threads"])
     scene = scene if scene is not None else load_scene(spec["scene"])
@@ -32,6 +34,81 @@ def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
                    spec.get("min_sample", MIN_SAMPLE_SECONDS), ref=ref)
     key = measurement_key(tuple(spec.get("code", ())))
     return spec, [dict(r, key=key) for r in rows]
+
+
+# ---------------------------------------------------------------- any measurement as one task
+class SceneRef(tuple):
+    """A named scene sent to a worker by name (the worker loads it through the mesh registry)."""
+
+
+class RaysRef(tuple):
+    """A ray set sent by (scene name, kind, n, seed): the worker regenerates it (deterministic)."""
+
+
+def _to_refs(args):
+    """Scenes known by name and ray sets made by ``make_rays`` travel as references, not arrays."""
+    from tracer.rays import Rays
+    from tracer.scene import Scene
+    out = []
+    scene = next((a for a in args if isinstance(a, Scene)), None)
+    for a in args:
+        if isinstance(a, Scene) and _reloadable(a):
+            out.append(SceneRef((a.name, a.n)))
+        elif isinstance(a, Rays) and scene is not None and a.kind in ("random", "camera", "path", "adversarial"):
+            out.append(RaysRef((scene.name, scene.n, a.kind, a.n, a.seed)))
+        else:
+            out.append(a)
+    return tuple(out)
+
+
+def _reloadable(scene) -> bool:
+    """A scene a worker can load by its name (a registry mesh, procedural or SPD scene)."""
+    from tracer import procedural, spd
+    from tracer.scene import manifest
+    return scene.name in manifest() or procedural.matches(scene.name) or spd.matches(scene.name)
+
+
+def _from_refs(args):
+    from tracer.rays import make_rays
+    from tracer.scene import load_scene
+    scenes = {}
+
+    def scene_of(name, n):
+        if name not in scenes:
+            scenes[name] = load_scene(name)
+            if scenes[name].n != n:
+                from tracer.errors import GridcostError
+                raise GridcostError(f"worker loaded {name} with {scenes[name].n:,} triangles, the client {n:,}")
+        return scenes[name]
+    out = []
+    for a in args:
+        if isinstance(a, SceneRef):
+            out.append(scene_of(*a))
+        elif isinstance(a, RaysRef):
+            name, n, kind, m, seed = a
+            r = make_rays(scene_of(name, n), kind, m, seed=seed)
+            if r.n != m:
+                from tracer.errors import GridcostError
+                raise GridcostError(f"worker made {r.n} {kind} rays for {name}, the client {m}")
+            out.append(r)
+        else:
+            out.append(a)
+    return tuple(out)
+
+
+def remote_task(fn, args, threads, models, code, clock_env=None):
+    """Run ``fn(*args)`` on a worker with the client's thread count, models location and clock
+    setting; returns (result, the worker's measurement key, its host)."""
+    from tracer.provenance import host, measurement_key
+    from tracer.timing import set_threads
+    if models:
+        os.environ["GRIDCOST_MODELS"] = models
+    if clock_env:
+        os.environ["GRIDCOST_CLOCK"] = clock_env
+    if threads:
+        set_threads(threads)
+    result = fn(*_from_refs(args))
+    return result, measurement_key(tuple(code)), host()
 
 
 class LocalExecutor:
@@ -55,10 +132,19 @@ class LocalExecutor:
             scene = (scenes or {}).get(spec["scene"])
             yield run_point(spec, scene, self._reference(scene) if scene is not None else None)
 
+    def run_task(self, fn, args: tuple, threads: int, code: tuple):
+        """(fn(*args), None, this host): a local task needs no key check."""
+        from tracer.provenance import host
+        return fn(*args), None, host()
+
 
 class DaskExecutor:
     """Send tasks to a dask.distributed cluster at ``address`` (or a LocalCluster of worker
-    processes for ``address='local'``). Results are yielded as they complete."""
+    processes for ``address='local'``). Results are yielded as they complete.
+
+    A Dask worker runs tasks on a thread of its own pool, where a one-thread Numba ``prange`` kernel
+    may run on another thread than the task's (the thread-clock check sees ~0 %); a run with Dask
+    therefore times everything, client and workers, with wall time (``GRIDCOST_CLOCK=wall``)."""
 
     name = "dask"
 
@@ -69,6 +155,7 @@ class DaskExecutor:
             from tracer.errors import GridcostError
             raise GridcostError("Dask is not installed: pip install 'gridcost[dask]'") from None
         self.ctx = ctx
+        os.environ["GRIDCOST_CLOCK"] = "wall"
         if address == "local":
             self.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
             self.client = Client(self.cluster)
@@ -78,16 +165,20 @@ class DaskExecutor:
 
     def map(self, specs: Iterable[dict], scenes: dict | None = None) -> Iterator[tuple[dict, list[dict]]]:
         from dask.distributed import as_completed
-        models = os.environ.get("GRIDCOST_MODELS")
-        futures = [self.client.submit(run_point, dict(s, models=models) if models else s, pure=False) for s in specs]
+        extra = {"models": os.environ.get("GRIDCOST_MODELS"), "clock_env": os.environ.get("GRIDCOST_CLOCK")}
+        futures = [self.client.submit(run_point, dict(s, **extra), pure=False) for s in specs]
         for fut in as_completed(futures):
             spec, rows = fut.result()
-            spec.pop("models", None)
+            for k in extra:
+                spec.pop(k, None)
             yield spec, rows
 
-    def submit(self, fn, *args):
-        """Run ``fn(*args)`` as one task (e.g. a paired comparison, both sides in one process)."""
-        return self.client.submit(fn, *args, pure=False).result()
+    def run_task(self, fn, args: tuple, threads: int, code: tuple):
+        """``fn(*args)`` as one task on one worker (e.g. a paired comparison: both sides in one
+        process on one machine); scenes and ray sets travel by name. Returns (result, the worker's
+        measurement key, its host)."""
+        return self.client.submit(remote_task, fn, _to_refs(args), threads, os.environ.get("GRIDCOST_MODELS"),
+                                  tuple(code), os.environ.get("GRIDCOST_CLOCK"), pure=False).result()
 
     def close(self) -> None:
         self.client.close()

@@ -209,12 +209,17 @@ class PointStore:
         self.ledger.add(prov)
         return value
 
-    def measure(self, params: dict, fn) -> tuple[dict, bool]:
-        """Stored row for ``params``, or ``fn()`` measured now and stored. Returns (row, was_cached)."""
+    def measure(self, params: dict, fn, *args) -> tuple[dict, bool]:
+        """Stored row for ``params``, or ``fn(*args)`` measured now and stored: through the run's
+        executor when the store belongs to a run (one task: here, or on one Dask worker; ``fn`` must
+        then be a module-level function). Returns (row, was_cached)."""
         row = self.get(params)
         if row is not None:
             return row, True
-        return self.put(params, fn()), False
+        if self.ctx is None:
+            return self.put(params, fn(*args)), False
+        value, prov = self.ctx.run_task(self, fn, *args)
+        return self.put(params, value, provenance=prov), False
 
 
 def write_index(out_dir, fig_dir) -> Path:

@@ -133,7 +133,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     done = store.get(spec)
     if done is not None:
         return done
-    tp = _time_side_by_side(scene, structure, points, rays, rounds, repeats, others)
+    tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others)
     med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
     best = min(med, key=med.get)
     out = {}
@@ -144,8 +144,15 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
                      "max_pct": penalty_pct(hi, 1.0), "target_ns": med[i] / rays.n * 1e9,
                      "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": rounds,
                      "speedup": {o: paired_ratio(tp, o, i)[0] for o in (others or {})}}
-    store.put(spec, out)
+    store.put(spec, out, provenance=prov)
     return out
+
+
+def _run(store: PointStore, fn, *args):
+    """``fn(*args)`` as one task of the store's run (local, or one Dask worker): (result, provenance)."""
+    if store.ctx is None:
+        return fn(*args), None
+    return store.ctx.run_task(store, fn, *args)
 
 
 def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None) -> dict:
@@ -170,9 +177,10 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
             "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats}
     done = store.get(spec)
     if done is None:
-        tp = _time_side_by_side(scene, structure, points, rays, rounds, repeats)
+        tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats)
         t = np.array([tp[i] for i in range(len(points))])  # (points, rounds)
-        done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()})
+        done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()},
+                         provenance=prov)
     return np.asarray(done["pct_over_best"])
 
 

@@ -5,6 +5,8 @@ scenes (sphereflake, tetra, gears, tree) at several size factors; the paper's nu
 as ratios where the scenes are comparable."""
 from __future__ import annotations
 
+import argparse
+
 import time
 from pathlib import Path
 
@@ -81,7 +83,10 @@ def _agree(hits, ref_t, ref_id, rtol=1e-5) -> int:
     return int(((a != b) | t_bad).sum())
 
 
-def measure_scene(name, args, res, repeats, flat_max, log=print) -> list[dict]:
+def measure_scene(name, args, res, repeats, flat_max) -> list[dict]:
+    """Trace the SPD view of scene ``name`` with every structure: counts, agreement with the oracle
+    (or the grid above ``nogrid_max``), and times (lists vs the 30^3 grid paired). One task of the run;
+    ``args`` holds nogrid_max, leaf_size and branching."""
     from tracer.oracle import oracle_intersect
     from tracer.spd import parse, spd_camera_rays, spd_objects, spd_scene
     from tracer.timing import build_clock, paired_ratio, time_call, time_paired
@@ -135,8 +140,6 @@ def measure_scene(name, args, res, repeats, flat_max, log=print) -> list[dict]:
         else:
             row.update(bvs=st["nodes"], depth=st["depth"], max_children=st["max_children"])
         rows.append(row)
-        log(f"  {name:14s} N={n:7,d} {kind:8s} tests/ray={m['tests']:9.2f} events/ray={m['steps']:9.1f} "
-            f"nodes/ray={m['nodes']:5.1f} {row['ns_per_ray']:9.0f} ns/ray  disagreements={row['disagreements']}")
     return rows
 
 
@@ -158,8 +161,16 @@ def run(ctx, args, log=print) -> dict:
     flat_max = args.flat_max or (5000 if quick else 40000)
     out_dir = Path(args.out) / TARGET
     rows = []
+    store = ctx.store(code=("experiments/fournier/table1.py",))
+    settings = {k: getattr(args, k) for k in ("nogrid_max", "leaf_size", "branching")}
     for name in progress(names, "fournier-table1", quiet=log is not print):
-        rows += measure_scene(name, args, res, repeats, flat_max, log=log)
+        key = {"target": TARGET, "scene": name, "res": res, "repeats": repeats, "flat_max": flat_max, **settings}
+        got, _ = store.measure(key, measure_scene, name, argparse.Namespace(**settings), res, repeats, flat_max)
+        rows += [dict(r, **store.provenance(key)) for r in got]
+        for r in got:
+            log(f"  {name:14s} N={r['N']:7,d} {r['structure']:8s} tests/ray={r['tests_per_ray']:9.2f} "
+                f"events/ray={r['events_per_ray']:9.1f} nodes/ray={r['nodes_per_ray']:5.1f} {r['ns_per_ray']:9.0f} ns/ray  "
+                f"disagreements={r['disagreements']}")
     df = pd.DataFrame(rows)
     wide = _wide(df)
     t1 = _table1(df)

@@ -186,6 +186,13 @@ def settings(args) -> dict:
 MEASURE_CODE = ("experiments/hapala/table1.py", "costmodel/select.py")
 
 
+def calibrate_named(name: str, cfg: dict) -> dict:
+    """:func:`calibrate_scene` of a named scene with the settings ``cfg`` (one task of the run)."""
+    scene = load_any(name)
+    return calibrate_scene(scene, KINDS, cfg["rays"], cfg["samples"], cfg["repeats"], cfg["grid_factor"],
+                           tuple(cfg["hiers"]), cfg["seed"])
+
+
 def measure_all(ctx, names, cfg: dict, log=print, repeat_pass: int = 1) -> list[dict]:
     """Calibrate every scene (resumable: one stored point per scene and settings, keyed by the
     measurement key of :class:`experiments.core.store.PointStore`); ``repeat_pass`` > 1 measures the
@@ -196,13 +203,8 @@ def measure_all(ctx, names, cfg: dict, log=print, repeat_pass: int = 1) -> list[
         key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "protocol": PROTOCOL, **cfg}
         if repeat_pass > 1:
             key["pass"] = repeat_pass
-
-        def fn(name=name):
-            scene = load_any(name)
-            return calibrate_scene(scene, KINDS, cfg["rays"], cfg["samples"], cfg["repeats"], cfg["grid_factor"],
-                                   tuple(cfg["hiers"]), cfg["seed"])
         t0 = time.perf_counter()
-        row, cached = store.measure(key, fn)
+        row, cached = store.measure(key, calibrate_named, name, cfg)
         log(f"[{i + 1}/{len(names)}] {name}: N={row['N']:,} {'(stored)' if cached else f'{time.perf_counter() - t0:.1f} s'}")
         raw.append(dict(row, provenance=store.provenance(key)))
     return raw

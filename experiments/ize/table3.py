@@ -80,7 +80,7 @@ def run(ctx, args, log=print) -> dict:
     table, fits = [], []
     for name, scene in scenes.items():
         p = paper.get(name, (name, None, None, None, None, None, None))
-        e = {"scene": name, "N": scene.n, **_memory_split(df, scene, rays[name]["random"], quick)}
+        e = {"scene": name, "N": scene.n, **_memory_split(store, df, scene, rays[name]["random"], quick)}
         for kind in KINDS:
             k = df[(df.scene == name) & (df.ray_kind == kind)]
             best = k.loc[k.anchored_ns_per_ray.idxmin()]
@@ -191,10 +191,10 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _memory_split(df, scene, random_rays, quick) -> dict:
+def _memory_split(store, df, scene, random_rays, quick) -> dict:
     """Probe the memory-free costs (:mod:`experiments.ize.memprobe`) and split the time of the theory's
     M and of the best M into the count model and the excess over it."""
-    c = memprobe.memory_free_costs(scene, random_rays, quick=quick)
+    c, _ = store.ctx.run_task(store, memprobe.memory_free_costs, scene, random_rays, 20_000, 1_000, quick)
     k = df[(df.scene == scene.name) & (df.ray_kind == "random")].drop_duplicates("cells")
     model = memprobe.model_ns(k, c)
     best, th = k.loc[k.anchored_ns_per_ray.idxmin()], nearest(k, 8.0 * scene.n**1.5)

@@ -88,14 +88,20 @@ def measure_points(store, target: str, scene, param_list, side, repeats, threads
              "threads": threads} for p in param_list]
     todo = [(k, p) for k, p in zip(keys, param_list) if store.get(k) is None]
     if todo:
-        built = [(CoherentGrid(**p).build(scene), camera(scene, side, p.get("packet", 8))) for _, p in todo]
-        tp = time_paired({j: (lambda c=c, r=r: c.intersect(r.origins, r.directions, counters=False))
-                          for j, (c, r) in enumerate(built)}, rounds=repeats, repeats=1)
-        samples = [tp[j] for j in range(len(built))]
-        for (key, params), (cgt, rays), sec in zip(todo, built, samples):
-            row = store.put(key, _row(scene, params, cgt, rays, sec, (max(sec) - min(sec)) / float(np.median(sec))))
+        rows, prov = store.ctx.run_task(store, time_points, scene, [p for _, p in todo], side, repeats)
+        for (key, params), row in zip(todo, rows):
+            store.put(key, row, provenance=prov)
             log(f"  {scene.name} {params}: {row['ns_per_ray']:.1f} ns/ray")
     return [dict(store.get(k, ignore_force=True), **store.provenance(k)) for k in keys]
+
+
+def time_points(scene, param_list, side, repeats) -> list[dict]:
+    """Build every parameter set and time them all in interleaved rounds (one task of the run)."""
+    built = [(CoherentGrid(**p).build(scene), camera(scene, side, p.get("packet", 8))) for p in param_list]
+    tp = time_paired({j: (lambda c=c, r=r: c.intersect(r.origins, r.directions, counters=False))
+                      for j, (c, r) in enumerate(built)}, rounds=repeats, repeats=1)
+    return [_row(scene, params, cgt, rays, tp[j], (max(tp[j]) - min(tp[j])) / float(np.median(tp[j])))
+            for j, (params, (cgt, rays)) in enumerate(zip(param_list, built))]
 
 
 def loso_predictions(df: pd.DataFrame, key: str) -> tuple[pd.DataFrame, pd.DataFrame]:
