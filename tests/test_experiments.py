@@ -82,7 +82,7 @@ def test_point_store_and_atomic_write(tmp_path):
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
 
 
-def test_dask_two_process_cluster_equals_local(tmp_path):
+def test_dask_two_process_cluster_equals_local(tmp_path, monkeypatch):
     """A LocalCluster of two worker processes (one thread each): each worker process loads the scene
     through the registry, rebuilds rays and structure, and returns the same rows as a local run
     (identical counters, hits, parameters; times present), with its measurement key."""
@@ -93,6 +93,7 @@ def test_dask_two_process_cluster_equals_local(tmp_path):
     from experiments.core.executor import DaskExecutor, LocalExecutor
     from experiments.core.sweep import sweep
     from tracer.rays import make_rays
+    monkeypatch.setenv("GRIDCOST_CLOCK", "wall")  # what DaskExecutor sets: the clock of a Dask run
     scene = load_scene("bunny-948")
     rays = {"random": make_rays(scene, "random", 2000, seed=0), "camera": make_rays(scene, "camera", 1500, seed=1)}
     params = [{"cells": 1000.0}, {"cells": 4000.0}, {"cells": 16000.0}]
