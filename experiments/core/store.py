@@ -234,6 +234,6 @@ def write_index(out_dir, fig_dir) -> Path:
         csvs = sorted(d.glob("*.csv")) + sorted(d.glob("*.json"))
         fig = sorted(f for f in figs.glob(f"{d.name}*.p[nd][gf]") if f.stem == d.name or f.stem.startswith(d.name + "_"))
         lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
-                     + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs[:6]) or "–") + " | "
+                     + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs) or "–") + " | "
                      + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")

@@ -14,7 +14,7 @@ import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, refine_minimum, select_model
 from experiments.core.common import add_scene_args, scene_from_args
-from experiments.core.store import write_json
+from experiments.core.store import atomic_write, write_json
 from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, paired_penalties, penalty_pct,
                                sweep)
 from tracer.rays import make_rays
@@ -77,6 +77,7 @@ def main(ctx, args) -> int:
     out_dir = Path(args.out) / "fit"
     ctx.write_csv(out_dir / f"{scene.name}.csv", allrows)
     write_json(out_dir / f"{scene.name}.json", out)
+    atomic_write(out_dir / "summary.md", _summary(out, sel, len(df)))
     ctx.write_meta(out_dir, "fit", started, scene=scene.name, rays=n_rays, repeats=repeats, threads=threads)
     if args.json:
         json.dump(out, sys.stdout, default=float)
@@ -100,3 +101,24 @@ def main(ctx, args) -> int:
           f"swept M over {pp['rounds']} rounds: {pp['min_pct']:.1f} .. {pp['max_pct']:.1f} %; "
           f"from the sweep alone {out['penalty_swept']:.1f} %)")
     return 0
+
+
+def _summary(out: dict, sel: dict, points: int) -> str:
+    """summary.md of one fit: the chosen model and why, the constants with CIs, the predicted M and
+    its paired penalty, the paper's Ti/Ts = 4 beside ours."""
+    ci = out["ci"]
+    lines = [f"# Fit of Ize's one-level cost (Eq 1 / Eq 5) on {out['scene']} (N = {out['N']:,})", "",
+             f"{points} sweep points, {out['rays']:,} random rays, {out['threads']} thread(s); times in ns per ray "
+             "(anchored: ratio to the scene's 8N grid x its stored time).", "",
+             f"**Model chosen:** {out['why']}", "",
+             "| model | constants | CV MAPE (%) | AIC | R² |", "|---|---|---|---|---|"]
+    lines += [f"| {r['model']} | {r['constants']} | {r['cv_mape_pct']:.1f} | {r['aic']:.1f} | {r['r2']:.3f} |"
+              for r in sel["candidates"]]
+    lines += ["", "| constant | ours (ns) | 95 % CI | paper |", "|---|---|---|---|"]
+    for k, paper in (("tsetup", "–"), ("ts", "–"), ("ti", "–"), ("ti_over_ts", "4")):
+        lo, hi = ci[k]
+        lines.append(f"| {k} | {out[k]:.3f} | {lo:.3f} – {hi:.3f} | {paper} |")
+    lines += ["", f"Predicted optimum M = {out['m_pred']:,.0f} ({out['m_pred_from']}); best swept M = "
+              f"{out['m_best']:,.0f}; penalty of the predicted M re-timed side by side with the three fastest "
+              f"swept M: {out['penalty']:.1f} % (rounds {out['penalty_range'][0]:.1f} – {out['penalty_range'][1]:.1f} %)."]
+    return "\n".join(lines) + "\n"

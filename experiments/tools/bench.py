@@ -16,7 +16,7 @@ import time
 
 
 from experiments.core.common import add_scene_args, emit_json, scene_from_args
-from experiments.core.store import write_json
+from experiments.core.store import atomic_write, write_json
 from experiments.core.common import progress
 from tracer.accel import build
 from tracer.rays import make_rays
@@ -160,6 +160,7 @@ def main(ctx, args) -> int:
     log(f"bench {scene.name}: {scene.n:,} faces, {args.rays:,} rays per kind, threads={args.threads or 'all'}")
     out = run_bench(scene, names, args.rays, max(1, args.repeats), args.threads, args.trimesh_rays, args.seed, log)
     write_json(f"{args.out}/bench/{scene.name}-t{out['threads']}.json", out)
+    atomic_write(f"{args.out}/bench/summary.md", _summary(out))
     if args.json:
         emit_json(out)
     else:
@@ -168,3 +169,26 @@ def main(ctx, args) -> int:
         for k, v in out["unavailable"].items():
             print(f"  unavailable {k}: {v}", file=sys.stderr)
     return 0
+
+
+def _summary(out: dict) -> str:
+    """summary.md: Mrays/s and build time of every structure, and the ratios to Embree (labelled
+    per thread when more than one thread ran) and the paired headline ratios."""
+    lines = [f"# bench: {out['scene']} ({out['faces']:,} faces), {out['rays']:,} rays per kind, "
+             f"{out['threads']} thread(s), median of {out['repeats']} after a warm-up", "",
+             "| structure | build (ms) | random Mrays/s | camera Mrays/s |", "|---|---|---|---|"]
+    for name, r in out["structures"].items():
+        lines.append(f"| {name} | {r['build_s'] * 1e3:.1f} | {r.get('random_mrays', float('nan')):.3f} | "
+                     f"{r.get('camera_mrays', float('nan')):.3f} |")
+    if out["ratios"]:
+        lines += ["", f"Ratios of throughput (build: of build time); Embree basis: {out.get('embree_ratio_basis', '–')}.", "",
+                  "| ratio | random | camera | build |", "|---|---|---|---|"]
+        for k, v in out["ratios"].items():
+            lines.append(f"| {k} | {v.get('random', float('nan')):.3f} | {v.get('camera', float('nan')):.3f} | "
+                         f"{v.get('build', float('nan')):.3f} |")
+    for k, v in (out.get("paired") or {}).get("grid/embree", {}).items():
+        lines.append(f"\nPaired (interleaved rounds, one thread each) grid/Embree {k}: {v['ratio']:.3f}x "
+                     f"(rounds {v['min']:.3f} – {v['max']:.3f})")
+    for k, v in out["unavailable"].items():
+        lines.append(f"\nUnavailable: {k}: {v}")
+    return "\n".join(lines) + "\n"
