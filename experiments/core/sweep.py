@@ -93,6 +93,14 @@ def nearest(rows_df, cells: float):
     return rows_df.iloc[int(np.argmin(np.abs(np.log(rows_df.param_cells.values / cells))))]
 
 
+def penalty_range(pp: dict) -> str:
+    """The rounds' range of a paired penalty as text; for the fastest point, "fastest" and its range
+    against the next fastest (negative: how much faster) instead of a point divided by itself."""
+    if pp.get("fastest"):
+        return f"fastest ({pp['min_pct']:.1f}..{pp['max_pct']:.1f} vs next)"
+    return f"{pp['min_pct']:.1f}..{pp['max_pct']:.1f}"
+
+
 def penalty_pct(t, best) -> float:
     """Extra time of ``t`` over ``best``, in percent."""
     return 100.0 * (t / best - 1.0)
@@ -139,9 +147,13 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     out = {}
     for name, p in targets.items():
         i = points.index(p)
-        ratio, lo, hi = paired_ratio(tp, i, best)
-        out[name] = {"penalty_pct": penalty_pct(ratio, 1.0), "min_pct": penalty_pct(lo, 1.0),
-                     "max_pct": penalty_pct(hi, 1.0), "target_ns": med[i] / rays.n * 1e9,
+        fastest_ = i == best and len(med) > 1
+        # the fastest point against itself says nothing: its range is against the next fastest
+        other = min((j for j in med if j != i), key=med.get) if fastest_ else best
+        ratio, lo, hi = paired_ratio(tp, i, other)
+        out[name] = {"penalty_pct": 0.0 if fastest_ else penalty_pct(ratio, 1.0), "min_pct": penalty_pct(lo, 1.0),
+                     "max_pct": penalty_pct(hi, 1.0), "fastest": bool(fastest_),
+                     "vs_next_pct": penalty_pct(ratio, 1.0) if fastest_ else None, "target_ns": med[i] / rays.n * 1e9,
                      "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": rounds,
                      "speedup": {o: paired_ratio(tp, o, i)[0] for o in (others or {})}}
     store.put(spec, out, provenance=prov)

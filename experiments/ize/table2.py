@@ -17,7 +17,7 @@ import pandas as pd
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
 from experiments.core.common import scene_list
 from experiments.core.store import atomic_write
-from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
+from experiments.core.sweep import (penalty_range, FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
 from tracer.constants import IZE_TI_OVER_TS
 from tracer.rays import make_rays
@@ -116,12 +116,12 @@ def run(ctx, args, log=print) -> dict:
             entry.update({
                 f"empirical_M{suffix}": int(best.cells), f"best_ns{suffix}": best.anchored_ns_per_ray,
                 f"theory_M_fitted{suffix}": int(rf.cells), f"penalty_fitted_pct{suffix}": pp["fitted"]["penalty_pct"],
-                f"penalty_fitted_range{suffix}": f"{pp['fitted']['min_pct']:.1f}..{pp['fitted']['max_pct']:.1f}",
+                f"penalty_fitted_range{suffix}": penalty_range(pp['fitted']),
                 f"theory_M_8N{suffix}": int(r8.cells), f"penalty_8N_pct{suffix}": pp["8N"]["penalty_pct"],
                 f"scene_ti_over_ts{suffix}": scene_ratio[name], f"theory_M_scene{suffix}": int(rs.cells),
                 f"penalty_scene_pct{suffix}": pp["scene_fit"]["penalty_pct"],
-                f"penalty_scene_range{suffix}": f"{pp['scene_fit']['min_pct']:.1f}..{pp['scene_fit']['max_pct']:.1f}",
-                f"penalty_8N_range{suffix}": f"{pp['8N']['min_pct']:.1f}..{pp['8N']['max_pct']:.1f}",
+                f"penalty_scene_range{suffix}": penalty_range(pp['scene_fit']),
+                f"penalty_8N_range{suffix}": penalty_range(pp['8N']),
                 f"penalty_fitted_swept_pct{suffix}": penalty_pct(rf.anchored_ns_per_ray, best.anchored_ns_per_ray),
                 f"penalty_8N_swept_pct{suffix}": penalty_pct(r8.anchored_ns_per_ray, best.anchored_ns_per_ray),
             })

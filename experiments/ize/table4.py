@@ -13,7 +13,7 @@ from costmodel.fit import refine_minimum
 from experiments.ize.table2 import PAPER as PAPER2
 from experiments.core.common import scene_list
 from experiments.core.store import atomic_write
-from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
+from experiments.core.sweep import penalty_range, FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
 from tracer.rays import make_rays
 from tracer.scene import load_scene
 from tracer.timing import set_threads
@@ -88,7 +88,7 @@ def run(ctx, args, log=print) -> dict:
             e.update({f"empirical_M1{sfx}": int(best.M1), f"empirical_total_cells{sfx}": int(best.cells),
                       f"theory_total_cells{sfx}": int(th.cells),
                       f"penalty_pct{sfx}": pp["penalty_pct"],
-                      f"penalty_range{sfx}": f"{pp['min_pct']:.1f}..{pp['max_pct']:.1f}",
+                      f"penalty_range{sfx}": penalty_range(pp),
                       f"penalty_swept_pct{sfx}": penalty_pct(th.anchored_ns_per_ray, best.anchored_ns_per_ray),
                       f"speedup_vs_best_one_level{sfx}": pp["speedup"]["one_level"],
                       f"speedup_swept{sfx}": k1.anchored_ns_per_ray.min() / th.anchored_ns_per_ray,
