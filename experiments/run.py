@@ -38,6 +38,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "exponents": ("experiments.ize.exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
     "predict": ("experiments.ize.predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
     "table3": ("experiments.ize.table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
+    "advise": ("experiments.tools.advise", "which structure to build for your mesh and ray budget: predicted build + trace times, pick, --check"),
     "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 

@@ -126,3 +126,20 @@ def test_memory_budget_exit_2(run_cli, cli_error):
                    env={"GRIDCOST_MEMORY_BUDGET": "1M"})
     line = cli_error(proc, None)
     assert "MiB" in line or "GiB" in line, line
+
+
+def test_advise_json_predicts_and_checks(run_cli, tmp_path):
+    """advise on a mesh outside its calibration: a pick among the candidates, predicted totals with
+    intervals around them, and --check's measured totals for the best three."""
+    p = run_cli("advise", "--quick", "--scene", "dragon-11k", "--rays", "1e6", "--check", "--json",
+                "--out", str(tmp_path), timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    out = _json(p)
+    names = [c["structure"] for c in out["candidates"]]
+    assert out["pick"] == names[0] and set(names) >= {"grid", "nested", "kdtree", "bvh"}
+    assert out["rays"] == 1e6
+    for c in out["candidates"]:
+        assert 0 < c["predicted_lo"] <= c["predicted_s"] <= c["predicted_hi"]
+    checked = [c for c in out["candidates"] if "measured_s" in c]
+    assert len(checked) == 3 and all(c["measured_s"] > 0 for c in checked)
+    assert (tmp_path / "advise" / "summary.md").exists()

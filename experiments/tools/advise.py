@@ -1,0 +1,181 @@
+"""``advise``: which structure to build for *your* scene and ray budget, with predicted times.
+
+    gridcost advise --mesh my.obj --rays 1e7 [--kind random|camera|path] [--check] [--json]
+
+For each candidate — the uniform grid at Ize's M = 8N, the two-level grid at M1 = (8N)^0.6, M2 = 8 N2,
+the kd-tree and the BVH (and coherent grid packets for camera rays) — it predicts the total time for
+R rays, build plus trace, with an interval, and picks the fastest:
+
+* **Grids** are probed, as Hapala 2011's decision algorithm does: built (timed, wall clock) and a
+  sample of 20,000 of the rays traced (median of 5 after a warm-up: the steady state of a long
+  run); the interval is the spread of the repeats, at least ±10 %.
+* **Hierarchies** are predicted without building them, from a calibration on this host: table1h's
+  measurements of a few small built-in scenes (stored like every point, so the first call measures
+  and later calls reuse it) fit the estimator of :class:`costmodel.select.GridcostEstimator`
+  (build time and per-ray time from N and the probed grid's counters); the interval is the 10-90 %
+  range of its leave-one-scene-out relative errors.
+
+``--check`` builds and times the three best candidates on R rays (at most 200,000 traced; the rest
+scaled) and prints measured beside predicted.
+"""
+from __future__ import annotations
+
+import time
+
+import pandas as pd
+
+from experiments.core.common import emit_json
+from experiments.core.store import atomic_write
+from tracer.errors import GridcostError
+
+#: the per-host calibration of the hierarchies: small scenes that travel with the package
+CALIBRATION = ["cornell", "boxes-44", "bunny-948", "bunny-3851", "cylinder-196", "particles-2000", "teapot",
+               "dragon-11k", "sphere-2880", "cylinder-3996", "bunny-16k"]
+CAL_CFG = {"rays": 3000, "repeats": 3, "grid_factor": 1.0, "seed": 0, "samples": [300, 1000, 3000],
+           "hiers": ["kdtree", "bvh"]}
+#: --quick: the six smallest, fewer rays (a first look, the tests)
+QUICK_CALIBRATION = ["cornell", "boxes-44", "bunny-948", "cylinder-196", "particles-2000", "teapot"]
+QUICK_CAL_CFG = dict(CAL_CFG, rays=1000, repeats=2, samples=[300, 1000])
+#: rays traced by the probes and by --check
+PROBE_RAYS, CHECK_RAYS = 20_000, 200_000
+#: relative half-width floor of a probed interval (single-pass timings of a shared machine)
+PROBE_FLOOR = 0.10
+
+
+def add_arguments(p) -> None:
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--mesh", help="path of your mesh (OBJ, PLY, OFF, STL, GLB)")
+    g.add_argument("--scene", help="a named scene")
+    p.add_argument("--rays", type=float, required=True, help="rays R the application will trace")
+    p.add_argument("--kind", choices=("random", "camera", "path"), default="random")
+    p.add_argument("--check", action="store_true", help="build and time the best candidates; measured beside predicted")
+    p.add_argument("--seed", type=int, default=0)
+
+
+def _calibration(ctx, log) -> dict:
+    """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}."""
+    from costmodel.select import GridcostEstimator, loo_errors, records
+    from experiments.hapala.table1 import measure_all
+    names, cfg = (QUICK_CALIBRATION, QUICK_CAL_CFG) if ctx.quick else (CALIBRATION, CAL_CFG)
+    t0 = time.time()
+    raw = measure_all(ctx, names, cfg, log=lambda *a: None)
+    if time.time() - t0 > 5:
+        log(f"advise: calibrated this host on {len(names)} small scenes in {time.time() - t0:.0f} s "
+            f"(stored: later calls reuse it)")
+    out = {}
+    for kind in ("random", "path"):
+        out[kind] = {}
+        for hier in cfg["hiers"]:
+            cal = records(raw, hier=hier)
+            cal = cal[cal.kind == kind].reset_index(drop=True)
+            est = GridcostEstimator().fit(cal)
+            loo = loo_errors(cal, GridcostEstimator)
+            rel_b = loo.T_BH_est / loo.T_BH - 1
+            rel_r = loo.t_RH_est / loo.t_RH - 1
+            out[kind][hier] = (est, {"build": (float(rel_b.quantile(0.1)), float(rel_b.quantile(0.9))),
+                                     "ray": (float(rel_r.quantile(0.1)), float(rel_r.quantile(0.9)))})
+    return out
+
+
+def _probe(scene, structure: str, params: dict, rays, seed: int) -> dict:
+    """Build (wall clock) and trace a sample of ``rays`` once: build seconds, per-ray seconds and the
+    relative spread of the sample's parts."""
+    from tracer.accel import build
+    from tracer.timing import build_clock, time_call
+    build(scene, structure, **params)  # compile / warm outside the timing
+    t0 = build_clock()
+    acc = build(scene, structure, **params)
+    t_build = build_clock() - t0
+    o, d = rays.origins[:PROBE_RAYS], rays.directions[:PROBE_RAYS]
+    tm = time_call(lambda: acc.intersect(o, d, counters=False), repeats=5, min_sample=0.005)
+    half = max(PROBE_FLOOR, tm.spread / 2)
+    return {"build_s": t_build, "ray_s": tm.median / len(o), "rel": (-half, half), "stats": acc.stats()}
+
+
+def _candidates(scene, kind, R, cal, seed, log) -> list[dict]:
+    from costmodel.select import Selector
+    from tracer.rays import make_rays
+    rays = make_rays(scene, kind, PROBE_RAYS, seed=seed)
+    out = []
+    for structure, params, label in (("grid", {"factor": 8.0}, "M = 8N (Ize Eq 4, Ti/Ts = 4)"),
+                                     ("nested", {"levels": 2}, "M1 = (8N)^0.6, M2 = 8 N2 (Ize Eq 12-13)")):
+        p = _probe(scene, structure, params, rays, seed)
+        out.append({"structure": structure, "params": params, "how": f"probed ({label})", "build_s": p["build_s"],
+                    "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+    if kind == "camera":
+        p = _probe(scene, "cgt", {}, rays, seed)
+        out.append({"structure": "cgt", "params": {}, "how": "probed (Wald 2006, lambda = 5, 8x8 packets)",
+                    "build_s": p["build_s"], "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+    ckind = kind if kind in cal else "random"
+    # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
+    _, feats = Selector(kind=ckind, sample_rays=1000, seed=seed).probe(scene, rays if kind == ckind else None)
+    for hier, (est, rel) in cal[ckind].items():
+        T_BH, t_RH = est.predict(feats["N"], feats)
+        how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
+        out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
+                    "rel_build": rel["build"], "rel_ray": rel["ray"]})
+    for c in out:
+        c["predicted_s"] = c["build_s"] + R * c["ray_s"]
+        c["predicted_lo"] = c["build_s"] * (1 + c["rel_build"][0]) + R * c["ray_s"] * (1 + c["rel_ray"][0])
+        c["predicted_hi"] = c["build_s"] * (1 + c["rel_build"][1]) + R * c["ray_s"] * (1 + c["rel_ray"][1])
+    return sorted(out, key=lambda c: c["predicted_s"])
+
+
+def _check(scene, kind, R, cands, seed) -> None:
+    """Build and time the three best candidates: measured_s = build + R x per-ray time."""
+    from tracer.accel import build
+    from tracer.rays import make_rays
+    from tracer.timing import build_clock, time_call
+    rays = make_rays(scene, kind, int(min(max(R, 1000), CHECK_RAYS)), seed=seed + 1)
+    for c in cands[:3]:
+        build(scene, c["structure"], **c["params"])
+        t0 = build_clock()
+        acc = build(scene, c["structure"], **c["params"])
+        tb = build_clock() - t0
+        tm = time_call(lambda: acc.intersect(rays.origins, rays.directions, counters=False), repeats=5)
+        c["measured_s"] = tb + R * tm.median / rays.n
+        c["measured_build_s"], c["measured_ray_s"] = tb, tm.median / rays.n
+
+
+def main(ctx, args) -> int:
+    from tracer.scene import load_mesh, load_scene
+    from tracer.timing import set_threads
+    started = time.time()
+    if not args.rays >= 1:
+        raise GridcostError(f"--rays must be >= 1, got {args.rays:g}")
+    log = (lambda *a: None) if args.json else print
+    set_threads(args.threads or 1)
+    scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
+    cal = _calibration(ctx, log)
+    cands = _candidates(scene, args.kind, args.rays, cal, args.seed, log)
+    if args.check:
+        _check(scene, args.kind, args.rays, cands, args.seed)
+    pick = cands[0]
+    runner = cands[1] if len(cands) > 1 else None
+    why = (f"{pick['structure']}: predicted {pick['predicted_s']:.3g} s for {args.rays:.3g} {args.kind} rays "
+           f"(build {pick['build_s'] * 1e3:.1f} ms + {pick['ray_s'] * 1e9:.0f} ns per ray)"
+           + (f", {runner['predicted_s'] / pick['predicted_s']:.2f}x faster than {runner['structure']}" if runner else "")
+           + (" — the intervals overlap: a close call" if runner and runner["predicted_lo"] < pick["predicted_hi"] else ""))
+    res = {"scene": scene.name, "N": scene.n, "rays": args.rays, "kind": args.kind, "pick": pick["structure"],
+           "why": why, "threads": 1,
+           "candidates": [{k: c[k] for k in ("structure", "params", "predicted_s", "predicted_lo", "predicted_hi", "how",
+                                             "build_s", "ray_s") + (("measured_s",) if "measured_s" in c else ())}
+                          for c in cands]}
+    out_dir = ctx.out / "advise"
+    df = pd.DataFrame([dict(c, scene=scene.name, N=scene.n, rays=args.rays, ray_kind=args.kind) for c in res["candidates"]])
+    df["params"] = df["params"].astype(str)
+    ctx.write_csv(out_dir / f"{scene.name}.csv", df)
+    lines = [f"# advise: {scene.name} (N = {scene.n:,}), {args.rays:.3g} {args.kind} rays, one thread", "",
+             f"**Pick: {why}**", "", "| structure | predicted (s) | interval (s) | build (ms) | per ray (ns) | measured (s) | how |",
+             "|---|---|---|---|---|---|---|"]
+    for c in cands:
+        meas = f"{c['measured_s']:.3g}" if "measured_s" in c else "–"
+        lines.append(f"| {c['structure']} | {c['predicted_s']:.3g} | {c['predicted_lo']:.3g} – {c['predicted_hi']:.3g} | "
+                     f"{c['build_s'] * 1e3:.1f} | {c['ray_s'] * 1e9:.0f} | {meas} | {c['how']} |")
+    atomic_write(out_dir / "summary.md", "\n".join(lines) + "\n")
+    ctx.write_meta(out_dir, "advise", started, scene=scene.name, rays=args.rays, kind=args.kind, check=args.check)
+    if args.json:
+        emit_json(res)
+    else:
+        print("\n".join(lines))
+    return 0
