@@ -22,9 +22,11 @@ Layout: pbrt's depth-first order with the below child at ``i + 1``, minus the em
 third of pbrt's leaves; they are counted as visited, not stored). ``nodes_`` (stored nodes, 2)
 int32: interior ``[axis | flag << 2 | child << 4, split (float32 bits)]`` with flag 0: below at
 ``i + 1``, above at ``child``; 1: below is an empty leaf, above at ``i + 1``; 2: above is an empty
-leaf, below at ``i + 1``. Leaf ``[3 | count << 2, offset]``. ``nodes_f_`` is the float32 view of
-the same memory. ``tri_ids_`` (refs) holds the scene's triangle indices in leaf order and
-``tri_verts_`` (refs, 9) float32 the triangles copied in that order.
+leaf, below at ``i + 1``. Leaf ``[3 | count << 2, x]``: x is the triangle's index itself in a
+one-triangle leaf (most leaves: max_prims = 1), else the offset of the leaf's refs in ``tri_ids_``.
+``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's triangle
+indices in leaf order and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
+ref (9+ refs per triangle at max_prims = 1 would not fit in L2 where the scene's triangles do).
 
 Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
 per block of BLOCK rays); a popped node whose t-range starts after the closest hit is skipped
@@ -32,7 +34,11 @@ per block of BLOCK rays); a popped node whose t-range starts after the closest h
 the above child with the parent's whole t-range, beneath entries of the below subtree that start
 later — stopping lost nearer hits there, e.g. on meshes far from the origin, where float32 rays
 often lie exactly in split planes); the any-hit variant (``IntersectP``) stops at the first hit.
-The near/far choice is branch-free. The ray is widened to float64 with ``np.float64`` (Numba's
+The near/far choice is branch-free (cmov: branches mispredict on random rays), the ray's
+origin / direction / inverse direction are read from a 9-entry per-block array indexed by the split
+axis, and each interior node prefetches its far (above) child, whose dependent load otherwise
+misses L2 on large trees. Without counters, an empty child is never pushed (visiting it only
+counts). The ray is widened to float64 with ``np.float64`` (Numba's
 ``float()`` keeps a float32 a float32) and passed to :func:`tracer.geometry.ray_triangle` exactly
 as the grid and the oracle pass it, so a hit's t is bit-identical to the oracle's.
 Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
@@ -48,7 +54,10 @@ import time
 
 import numba
 import numpy as np
-from numba import prange
+from llvmlite import ir
+from numba import prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
@@ -349,6 +358,23 @@ def kd_compact(w0, w1, max_depth):
 
 
 # ---------------------------------------------------------------- traversal
+@intrinsic
+def prefetch(typingctx, arr, idx):
+    """``prefetch(a, i)``: hint the CPU to load the cache line of ``a.ravel()[i]`` (LLVM's
+    ``llvm.prefetch``, read, high locality). Never faults, also for an index past the end."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]), "llvm.prefetch.p0")
+        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+    return sig, codegen
+
+
 @jit(inline="always")
 def _slab_clip(lo, hi, o, inv, t0, t1):
     """Clip [t0, t1] to one slab of the root box (float64; a NaN product is ignored)."""
@@ -369,7 +395,7 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
     """Trace rays lo..hi-1 (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when ``anyhit``) with one
     todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array."""
     rs = np.empty(9, np.float64)  # origin, direction, inverse direction, indexed by axis
-    sn = np.empty(stack_size, np.int64)
+    sn = np.empty(stack_size, np.int32)
     s0 = np.empty(stack_size, np.float64)
     s1 = np.empty(stack_size, np.float64)
     bx0 = box[0]
@@ -402,6 +428,8 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
         t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
         in_box = t0 <= t1
         if in_box:
+            # diag / max|d_k| >= diag / |d|: the t-length of the scene, conservatively
+            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
             rs[0] = ox
             rs[1] = oy
             rs[2] = oz
@@ -411,97 +439,113 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
             rs[6] = ix
             rs[7] = iy
             rs[8] = iz
-            # diag / max|d_k| >= diag / |d|: the t-length of the scene, conservatively
-            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
             sp = 0
             node = 0
             ntmin = t0
             ntmax = t1
             while True:
-                if best < ntmin - tol:
-                    # the closest hit lies before this node: skip it, and go on with the next
-                    # pending one. Not done: the todo stack is not ordered by entry t. A ray in a
-                    # split plane (d == 0, o == split) pushes the above child with the parent's
-                    # whole range, under the entries the below child's subtree pushes later with
-                    # larger entry t; and tol lets a child's entry t exceed its sibling's.
-                    if sp == 0:
-                        break
-                    sp -= 1
-                    spu = np.uintp(sp)
-                    node = sn[spu]
-                    ntmin = s0[spu]
-                    ntmax = s1[spu]
-                    continue
-                nvis += 1
-                if node >= 0:
+                # descend from ``node`` to a leaf, front to back
+                while node >= 0:
+                    nvis += 1
                     nu = np.uintp(2 * node)
                     w = nodes[nu]
                     axis = w & 3
-                    if axis != LEAF:
-                        split = float(nodes_f[nu + one])
-                        au = np.uintp(axis)
-                        o = rs[au]
-                        d = rs[au + np.uintp(3)]
-                        fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
-                        below = -1 if fl == 1 else node + 1
-                        above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
-                        if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
-                            if o < split:
-                                node = below
-                            elif o > split:
-                                node = above
-                            else:
-                                spu = np.uintp(sp)
-                                sn[spu] = above
-                                s0[spu] = ntmin
-                                s1[spu] = ntmax
-                                sp += 1
-                                node = below
-                            continue
-                        tp = (split - o) * rs[au + np.uintp(6)]
-                        neg = d < 0.0
-                        first = above if neg else below
-                        second = below if neg else above
-                        lo_tp = tp - tol
-                        hi_tp = tp + tol
-                        only_first = lo_tp > ntmax
-                        only_second = hi_tp < ntmin
-                        both = not (only_first or only_second)
-                        # branch-free: always write the todo entry, keep it only when both
-                        spu = np.uintp(sp)
-                        sn[spu] = second
-                        s0[spu] = max(ntmin, lo_tp)
-                        s1[spu] = ntmax
-                        sp += 1 if both else 0
-                        node = second if only_second else first
-                        ntmax = min(ntmax, hi_tp) if both else ntmax
+                    if axis == LEAF:
+                        break
+                    # the above child is far away in memory: start loading it now (w >> 4 is 0
+                    # when a child is an empty leaf, a harmless hint)
+                    prefetch(nodes, np.uintp(2 * (w >> 4)))
+                    split = np.float64(nodes_f[nu + one])
+                    fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
+                    below = -1 if fl == 1 else node + 1
+                    above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
+                    au = np.uintp(axis)
+                    o = rs[au]
+                    d = rs[au + np.uintp(3)]
+                    inv = rs[au + np.uintp(6)]
+                    if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
+                        if o < split:
+                            node = below
+                        elif o > split:
+                            node = above
+                        else:
+                            spu = np.uintp(sp)
+                            sn[spu] = above
+                            s0[spu] = ntmin
+                            s1[spu] = ntmax
+                            sp += 1
+                            node = below
                         continue
+                    tp = (split - o) * inv
+                    neg = d < 0.0
+                    first = above if neg else below
+                    second = below if neg else above
+                    lo_tp = tp - tol
+                    hi_tp = tp + tol
+                    only_first = lo_tp > ntmax
+                    only_second = hi_tp < ntmin
+                    both = not (only_first or only_second)
+                    # branch-free: always write the todo entry, keep it only when both (and,
+                    # without counters, only when it is not an empty leaf: visiting one only counts)
+                    spu = np.uintp(sp)
+                    sn[spu] = second
+                    s0[spu] = max(ntmin, lo_tp)
+                    s1[spu] = ntmax
+                    keep = both and (counters is not None or second >= 0)
+                    sp += 1 if keep else 0
+                    node = second if only_second else first
+                    ntmax = min(ntmax, hi_tp) if both else ntmax
+                if node < 0:
+                    nvis += 1
+                    leaves += 1  # an empty leaf: visited as pbrt does, but not stored
+                else:
                     leaves += 1
-                    off = nodes[nu + one]
-                    done = False
-                    for rr in range(off, off + (w >> 2)):
-                        r = np.uintp(rr)
+                    cnt = w >> 2
+                    x = nodes[nu + one]
+                    if cnt == 1:  # single-triangle leaf: the triangle's index inline
+                        r = np.uintp(x)
                         tests += 1
                         t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
                                          tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
                                          tmin, best)
                         if t < best:
                             best = t
-                            best_id = ids[r]
+                            best_id = x
                             if anyhit:
-                                done = True
                                 break
-                    if done:
+                    else:
+                        done = False
+                        for rr in range(x, x + cnt):
+                            tid = ids[np.uintp(rr)]
+                            r = np.uintp(tid)
+                            tests += 1
+                            t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                                             tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7],
+                                             tv[r, 8], tmin, best)
+                            if t < best:
+                                best = t
+                                best_id = tid
+                                if anyhit:
+                                    done = True
+                                    break
+                        if done:
+                            break
+                # pop the next pending node; one that starts after the closest hit is skipped,
+                # not a stop: the todo stack is not ordered by entry t. A ray in a split plane
+                # (d == 0, o == split) pushes the above child with the parent's whole range,
+                # under the entries the below child's subtree pushes later with larger entry t;
+                # and tol lets a child's entry t exceed its sibling's.
+                node = -2
+                while sp > 0:
+                    sp -= 1
+                    spu = np.uintp(sp)
+                    ntmin = s0[spu]
+                    if not best < ntmin - tol:
+                        node = sn[spu]
+                        ntmax = s1[spu]
                         break
-                else:
-                    leaves += 1  # an empty leaf: visited as pbrt does, but not stored
-                if sp == 0:
+                if node == -2:
                     break
-                sp -= 1
-                spu = np.uintp(sp)
-                node = sn[spu]
-                ntmin = s0[spu]
-                ntmax = s1[spu]
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 
@@ -573,6 +617,9 @@ class KdTree(TreeTraceMixin, Accel):
         del wt, wc
         inner = (w0 & 3) != LEAF
         w1 = np.where(inner, spl.view(np.int32), w1).astype(np.int32)
+        # single-triangle leaves hold the triangle's index itself (no refs-array indirection)
+        one_tri = ~inner & ((w0 >> 2) == 1)
+        w1[one_tri] = leaf_ids[w1[one_tri]]
         nodes = kd_compact(w0, w1, depth)
         if len(nodes) >= 2**27:
             raise GridcostError(f"a kd-tree of {len(nodes):,} nodes exceeds the 27-bit child index")
@@ -580,7 +627,8 @@ class KdTree(TreeTraceMixin, Accel):
         self.nodes_f_ = nodes.view(np.float32)
         self.logical_nodes_ = len(w0)
         self.tri_ids_ = leaf_ids
-        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[leaf_ids])
+        # vertices in scene order (not copied per reference: 9 refs per triangle would not fit L2)
+        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9))
         self.box_ = root_box(scene) if n else np.zeros(6)
         self.build_seconds_ = time.perf_counter() - t_start
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
