@@ -37,13 +37,14 @@ TARGETS: dict[str, tuple[str, str]] = {
     "havran": ("experiments.hapala.havran", "Havran scene statistics from the grid (sparseness, maxRefs, moments)"),
     "exponents": ("experiments.ize.exponents", "fitted exponents M_best ∝ N^alpha per scene family, with CIs"),
     "predict": ("experiments.ize.predict", "cross-scene runtime prediction with the counter cost model (leave one out)"),
+    "stability": ("experiments.ize.stability", "where each rule fails: penalty of 8N, 2N·Ti/Ts, 8N^1.5, pbrt, Wald's lambda against N and scene family"),
     "table3": ("experiments.ize.table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
     "advise": ("experiments.tools.advise", "which structure to build for your mesh and ray budget: predicted build + trace times, pick, --check"),
     "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2", "predict", "table3", "table4", "fig2", "fig5", "exponents",
+ALL_ORDER = ["derive", "table2", "predict", "table3", "table4", "fig2", "fig5", "exponents", "stability",
              "table1h", "fig1h", "fig2h", "selector", "havran", "wald-table1", "wald-table4", "wald-fig6", "wald-fig7",
              "fournier-table1"]
 
