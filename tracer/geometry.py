@@ -4,8 +4,9 @@
   call the same function, so a structure that tests the right triangle gets bit-identical t.
 * :func:`ray_box` — slab test returning the parametric overlap [t0, t1] (robust to zero directions).
 * :func:`tri_box_overlap` — Akenine-Moeller separating-axis triangle/box test (float64).
-* :func:`dda_setup` — Amanatides & Woo 3D-DDA set-up at parameter t; the one copy used by the
-  uniform grid, every level of the nested grids and the packet tracer's single-ray fallback.
+* :func:`dda_setup`, :func:`dda_cursor`, :func:`dda_step` — Amanatides & Woo 3D-DDA: set-up at
+  parameter t, its stepping form, and one step to the next cell; the one copy used by the uniform
+  grid, every level of the nested grids and the packet tracer's single-ray fallback.
 """
 from __future__ import annotations
 
@@ -199,3 +200,34 @@ def dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz):
     ly = ny - 1 - iy if sy > 0 else iy
     lz = nz - 1 - iz if sz > 0 else iz
     return c, lx, ly, lz, sx, sy * nx, sz * nxy
+
+
+@jit(inline="always")
+def dda_step(c, lx, ly, lz, cdx, cdy, cdz, tnx, tny, tnz, tdx, tdy, tdz, best, tend):
+    """One step of the DDA in the stepping form of :func:`dda_cursor`: leave the current cell through
+    its nearest plane (the axis with the smallest next-crossing t*: x when tnx < tny and tnx < tnz,
+    else y when tny < tnz, else z), i.e. ``l -= 1; c += cd; tn += td`` on that axis.
+
+    The ray stops instead (nothing is updated) when the closest hit so far lies before that plane
+    (``best <= t``: no later cell can hold a closer hit), when the plane lies past ``tend`` (the end
+    of the interval traced, e.g. a nested grid's parent-cell exit; INF for a whole grid), or when
+    that axis has no cell left (the ray leaves the grid).
+
+    Returns (axis, c, lx, ly, lz, tnx, tny, tnz, t): ``axis`` 0/1/2 for the step taken (callers that
+    track cell coordinates add the step to that axis) or -1 to stop, and ``t`` the crossing's
+    parameter (the entry of the new cell)."""
+    if tnx < tny:
+        axis = 0 if tnx < tnz else 2
+    else:
+        axis = 1 if tny < tnz else 2
+    if axis == 0:
+        if best <= tnx or tnx > tend or lx == 0:
+            return -1, c, lx, ly, lz, tnx, tny, tnz, tnx
+        return 0, c + cdx, lx - 1, ly, lz, tnx + tdx, tny, tnz, tnx
+    if axis == 1:
+        if best <= tny or tny > tend or ly == 0:
+            return -1, c, lx, ly, lz, tnx, tny, tnz, tny
+        return 1, c + cdy, lx, ly - 1, lz, tnx, tny + tdy, tnz, tny
+    if best <= tnz or tnz > tend or lz == 0:
+        return -1, c, lx, ly, lz, tnx, tny, tnz, tnz
+    return 2, c + cdz, lx, ly, lz - 1, tnx, tny, tnz + tdz, tnz

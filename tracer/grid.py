@@ -19,7 +19,7 @@ from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
-from tracer.geometry import INF, dda_cursor, dda_setup, ray_box, ray_triangle, tri_box_overlap
+from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle, tri_box_overlap
 from tracer.memory import cache_bytes, check_budget
 
 #: direct-mapped mailbox entries per thread (power of two)
@@ -251,41 +251,18 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                 best_ref = r
                 if anyhit:
                     return best, tri_ids[ru], 1, steps, tests, skips, jumps
-        # leave the cell through its nearest plane
-        if tnx < tny:
-            if tnx < tnz:
-                if best <= tnx or lx == 0:
-                    break
-                lx -= 1
-                c += cdx
-                tnx += tdx
-                if macro is not None:
-                    ix += sx
+        # leave the cell through its nearest plane (stops at a hit before it, or at the grid's end)
+        axis, c, lx, ly, lz, tnx, tny, tnz, _ = dda_step(c, lx, ly, lz, cdx, cdy, cdz, tnx, tny, tnz,
+                                                         tdx, tdy, tdz, best, INF)
+        if axis < 0:
+            break
+        if macro is not None:  # the macrocell test needs the cell coordinates
+            if axis == 0:
+                ix += sx
+            elif axis == 1:
+                iy += sy
             else:
-                if best <= tnz or lz == 0:
-                    break
-                lz -= 1
-                c += cdz
-                tnz += tdz
-                if macro is not None:
-                    iz += sz
-        else:
-            if tny < tnz:
-                if best <= tny or ly == 0:
-                    break
-                ly -= 1
-                c += cdy
-                tny += tdy
-                if macro is not None:
-                    iy += sy
-            else:
-                if best <= tnz or lz == 0:
-                    break
-                lz -= 1
-                c += cdz
-                tnz += tdz
-                if macro is not None:
-                    iz += sz
+                iz += sz
     if best_ref < 0:
         return INF, -1, 1, steps, tests, skips, jumps
     return best, tri_ids[np.uintp(best_ref)], 1, steps, tests, skips, jumps

@@ -34,7 +34,7 @@ from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
-from tracer.geometry import INF, dda_cursor, dda_setup, ray_box, ray_triangle
+from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle
 from tracer.grid import grid_assign, grid_params, res_from_cells, starts_shifted
 from tracer.memory import check_budget
 
@@ -183,46 +183,14 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                     return best, best_id, setups, steps, tests, nodes
         if lvl is not None:
             lvl[ray, depth, 2] += b - a if b > a else 0
-        # step to the next cell; leaving a grid (its cells-left counter at 0, or past the parent
-        # cell's exit) pops the parent and steps it on
+        # step to the next cell (tenter: its entry, where a child grid's DDA starts); a grid whose
+        # step stops (a hit before the plane, past the parent cell's exit tend, or the grid's edge)
+        # pops the parent and steps it on
         done = False
         while True:
-            leave = False
-            if tnx < tny:
-                if tnx < tnz:
-                    if best <= tnx or tnx > tend or lx == 0:
-                        leave = True
-                    else:
-                        lx -= 1
-                        c += cdx
-                        tenter = tnx
-                        tnx += tdx
-                else:
-                    if best <= tnz or tnz > tend or lz == 0:
-                        leave = True
-                    else:
-                        lz -= 1
-                        c += cdz
-                        tenter = tnz
-                        tnz += tdz
-            else:
-                if tny < tnz:
-                    if best <= tny or tny > tend or ly == 0:
-                        leave = True
-                    else:
-                        ly -= 1
-                        c += cdy
-                        tenter = tny
-                        tny += tdy
-                else:
-                    if best <= tnz or tnz > tend or lz == 0:
-                        leave = True
-                    else:
-                        lz -= 1
-                        c += cdz
-                        tenter = tnz
-                        tnz += tdz
-            if not leave:
+            axis, c, lx, ly, lz, tnx, tny, tnz, tenter = dda_step(c, lx, ly, lz, cdx, cdy, cdz, tnx, tny, tnz,
+                                                                  tdx, tdy, tdz, best, tend)
+            if axis >= 0:
                 break
             if depth == 0:
                 done = True
