@@ -1,6 +1,6 @@
-"""Scene loading (tracer.scene, tracer.procedural): MANIFEST meshes, named and procedural scenes,
-bounds, bad input (library and CLI), triangle strips, textures without Pillow, degenerate triangles,
-the parsed-mesh cache."""
+"""Scene loading (tracer.scene, tracer.meshfile, tracer.procedural, tracer.spd): MANIFEST meshes,
+named, procedural and SPD scenes, bounds, bad input (library and CLI), triangle strips, textures
+without Pillow, degenerate triangles, the parsed-mesh cache."""
 from __future__ import annotations
 
 import json
@@ -116,6 +116,32 @@ def test_named_scenes_resolve(load):
 def test_unknown_scene_name():
     with pytest.raises(GridcostError, match="unknown scene 'no-such-scene'"):
         load_scene("no-such-scene")
+
+
+def test_one_scene_registry_lists_and_loads_every_kind():
+    """scene_names() lists registry meshes, procedural and SPD scenes, and load_scene loads each kind
+    by name (an SPD scene is the generator's, the same triangles)."""
+    from tracer import procedural, registry, spd
+    from tracer.scene import scene_names
+    names = scene_names()
+    assert set(registry.MESHES) | set(procedural.names()) | set(spd.names()) <= set(names)
+    assert len(names) == len(set(names))
+    sc = load_scene("tetra-2")
+    assert (sc.name, sc.source, sc.n) == ("tetra-2", "spd", spd.spd_triangles("tetra-2"))
+    np.testing.assert_array_equal(sc.tris, spd.spd_scene("tetra-2").tris)
+    assert load_scene("sphereflake-1").n == spd.spd_triangles("sphereflake-1")
+    with pytest.raises(GridcostError, match="size factor"):
+        load_scene("tetra-99")
+
+
+def test_scene_type_has_no_loader_below_it():
+    """Scene lives in tracer.scenetype (imported by every loader and generator), re-exported by
+    tracer.scene; procedural scenes built around a named mesh get it from the caller."""
+    from tracer import procedural, scene, scenetype
+    assert scene.Scene is scenetype.Scene and scene.scene_bounds is scenetype.scene_bounds
+    with pytest.raises(GridcostError, match="loader"):
+        procedural.make("teapot-in-stadium")
+    assert procedural.make("cylinder-196").n == 196
 
 
 # ---------------------------------------------------------------- procedural scenes
@@ -447,12 +473,12 @@ def test_cache_second_load_identical_and_no_new_file(write_mesh, bunny, monkeypa
     after_first = set(cdir.glob("*"))
     assert len(after_first - before) == 1  # one new cache entry
     # the second load must come from the cache: parsing again would fail
-    import tracer.scene as scene_mod
+    import tracer.meshfile as meshfile
 
     def no_parse(*a, **k):
         raise AssertionError("second load parsed the file again instead of using the cache")
 
-    monkeypatch.setattr(scene_mod, "_read", no_parse)
+    monkeypatch.setattr(meshfile, "_read", no_parse)
     second = load_mesh(path)
     assert set(cdir.glob("*")) == after_first
     np.testing.assert_array_equal(first.tris, second.tris)

@@ -21,14 +21,23 @@
 ``surfpoints-N``            N tiny triangles scattered on a sphere: "points on a surface", the
                             manifold-like data of Ize Sec 4 with rays that (almost) never hit
 ==========================  ================================================================
+
+The generators import only the scene type (:mod:`tracer.scenetype`): ``teapot-in-stadium`` gets its
+teapot from the caller (:func:`make`'s ``mesh``; :func:`tracer.scene.load_scene` passes its loader
+of named meshes), so this module never imports the scene registry back.
 """
 from __future__ import annotations
 
 import re
+from typing import Callable
 
 import numpy as np
 
 from tracer.errors import GridcostError
+from tracer.scenetype import Scene
+
+#: the named mesh teapot-in-stadium is built around (from :func:`make`'s ``mesh`` loader)
+TEAPOT = "teapot"
 
 PATTERNS = {
     "cylinder": re.compile(r"^cylinder-(\d+)$"),
@@ -59,10 +68,14 @@ def _count(m) -> int:
     return n
 
 
-def make(spec: str):
-    from tracer.scene import Scene
+def make(spec: str, mesh: Callable[[str], Scene | None] | None = None) -> Scene:
+    """The procedural scene ``spec``. ``teapot-in-stadium`` needs ``mesh``: ``mesh(name)`` returns a
+    named mesh's :class:`Scene`, or None when the name is unknown (then a sphere stands in for the
+    teapot); :func:`tracer.scene.load_scene` passes its own."""
     if spec == "teapot-in-stadium":
-        tris, n_pot, view = _teapot_in_stadium()
+        if mesh is None:
+            raise GridcostError("teapot-in-stadium needs a loader of named meshes (tracer.scene.load_scene passes one)")
+        tris, n_pot, view = _teapot_in_stadium(mesh)
         return Scene(tris, spec, "procedural", report={"teapot_triangles": n_pot}, view=view)
     if spec == "room":
         return Scene(room(), spec, "procedural")
@@ -184,13 +197,13 @@ def boxes(n: int, seed: int = 2) -> np.ndarray:
     return np.concatenate([box(a, a + s) for a, s in zip(lo, size)])
 
 
-def teapot_in_stadium() -> np.ndarray:
-    """The teapot model (from the models directory; a sphere if it is missing) inside a stadium:
-    a subdivided box 200x the teapot's size (floor, walls, roof). The teapot's triangles come first."""
-    return _teapot_in_stadium()[0]
+def teapot_in_stadium(mesh: Callable[[str], Scene | None]) -> np.ndarray:
+    """The teapot model (``mesh("teapot")``; a sphere if that is None) inside a stadium: a
+    subdivided box 200x the teapot's size (floor, walls, roof). The teapot's triangles come first."""
+    return _teapot_in_stadium(mesh)[0]
 
 
-def _teapot_in_stadium():
+def _teapot_in_stadium(mesh):
     """(triangles, number of teapot triangles (the first ones), view ``(centre, radius)``).
 
     The view is a close-up of the teapot: centred on its box, radius half the box's smallest extent
@@ -198,11 +211,8 @@ def _teapot_in_stadium():
     full bounding sphere (half the box diagonal) would leave the pot about 15 % of the pixels from the
     default camera direction, the rest of the image being stadium floor and walls; this view gives
     about 85 % (a sphere stand-in: pi / 4)."""
-    from tracer.scene import load_scene, manifest
-    if "teapot" in manifest():
-        pot = load_scene("teapot").tris
-    else:
-        pot = sphere(6000)
+    pot = mesh(TEAPOT)
+    pot = pot.tris if pot is not None else sphere(6000)
     lo = pot.reshape(-1, 3).min(0)
     hi = pot.reshape(-1, 3).max(0)
     size = float((hi - lo).max())

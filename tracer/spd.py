@@ -21,7 +21,9 @@ tessellated into triangles, so the structures of :mod:`tracer` can trace them:
 Every SPD polygon (floor, field, ground) is a square of 2 triangles. ``spd_objects(name)`` gives
 the object count of the original database (spheres, cones and polygons, as Fournier & Poulin 1993
 count them) beside the triangle count ``spd_triangles(name)``; ``spd_view(name)`` the SPD
-viewpoint (eye, look-at, up, field of view) and ``spd_camera_rays`` primary rays from it.
+viewpoint (eye, look-at, up, field of view) and ``spd_camera_rays`` primary rays from it. The
+scenes load by name like every other (``tracer.scene.load_scene("sphereflake-2")``) and are listed by
+``tracer.scene.scene_names()``.
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ import re
 import numpy as np
 
 from tracer.errors import GridcostError
+from tracer.scenetype import Scene
 
 #: name -> valid size factors (largest sizes stay under 200k triangles)
 SIZES = {
@@ -328,8 +331,8 @@ def spd_objects(name: str) -> int:
 
 
 def spd_scene(name: str):
-    """The named SPD scene (e.g. ``"sphereflake-2"``, ``"tetra-5"``) as a :class:`tracer.scene.Scene`."""
-    from tracer.scene import Scene
+    """The named SPD scene (e.g. ``"sphereflake-2"``, ``"tetra-5"``) as a :class:`~tracer.scenetype.Scene`
+    (what :func:`tracer.scene.load_scene` returns for SPD names)."""
     kind, sf = parse(name)
     return Scene(GENERATORS[kind](sf), name, "spd")
 
