@@ -87,12 +87,12 @@ def test_point_with_another_key_is_remeasured(tmp_path, monkeypatch):
     # another thread count (or code, clock, CPU): the stored point is stale and measured again
     from tracer import provenance
     real = provenance.measurement_key
-    monkeypatch.setattr(provenance, "measurement_key", lambda code=(), threads=None, clock=None:
-                        dict(real(code), threads=99))
+    monkeypatch.setattr(provenance, "measurement_key", lambda code, threads, clock:
+                        dict(real(code, threads, clock), threads=99))
     assert PointStore(tmp_path).measure({"p": 1}, fn) == ({"v": 2}, False)
     # --reuse-stale uses a stale point and marks it
-    monkeypatch.setattr(provenance, "measurement_key", lambda code=(), threads=None, clock=None:
-                        dict(real(code), threads=98))
+    monkeypatch.setattr(provenance, "measurement_key", lambda code, threads, clock:
+                        dict(real(code, threads, clock), threads=98))
     stale = PointStore(tmp_path, reuse_stale=True)
     assert stale.get({"p": 1}) == {"v": 2}
     assert stale.provenance({"p": 1})["stale"] is True

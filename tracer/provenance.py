@@ -10,7 +10,8 @@ count, the clock, the CPU and the library versions.
 * :func:`measurement_key` is the key every stored measurement carries (``experiments.results``);
   a stored point whose key differs from the current one is measured again.
 
-This module imports nothing heavy (it runs before Numba compiles anything).
+This module imports nothing of tracer (it runs before Numba compiles anything; :mod:`tracer._jit`
+and :mod:`tracer.timing` import it).
 """
 from __future__ import annotations
 
@@ -96,17 +97,14 @@ def library_versions() -> dict:
     return out
 
 
-def measurement_key(code_paths: tuple[str, ...] = (), threads: int | None = None, clock: str | None = None) -> dict:
-    """The key of a measurement made now: the digest of ``tracer/`` and of ``code_paths`` (files or
-    package folders relative to the repository: the experiment and cost-model code that shapes the
-    point), the Numba thread count, the clock, the CPU model and :data:`KEY_LIBRARIES` versions.
-    Hosts with the same CPU share points (the host is recorded per row, not keyed)."""
-    import numba
-
-    from tracer.timing import clock_name
-    return {"code": source_digest("tracer", *sorted(code_paths))[:16],
-            "threads": int(threads if threads is not None else numba.get_num_threads()),
-            "clock": clock or clock_name(), "cpu": cpu_model(), "versions": library_versions()}
+def measurement_key(code_paths: tuple[str, ...], threads: int, clock: str) -> dict:
+    """The key of a measurement: the digest of ``tracer/`` and of ``code_paths`` (files or package
+    folders relative to the repository: the experiment and cost-model code that shapes the point),
+    the Numba thread count, the clock, the CPU model and :data:`KEY_LIBRARIES` versions. Hosts with
+    the same CPU share points (the host is recorded per row, not keyed).
+    :func:`tracer.timing.measurement_key` fills in the current threads and clock."""
+    return {"code": source_digest("tracer", *sorted(code_paths))[:16], "threads": int(threads),
+            "clock": clock, "cpu": cpu_model(), "versions": library_versions()}
 
 
 def key_digest(key: dict) -> str:

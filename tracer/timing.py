@@ -205,6 +205,15 @@ def set_threads(n: int | None) -> int:
     return n
 
 
+def measurement_key(code_paths: tuple[str, ...] = ()) -> dict:
+    """:func:`tracer.provenance.measurement_key` of a measurement made now: this process's Numba
+    thread count and clock (:func:`clock_name`)."""
+    import numba
+
+    from tracer import provenance
+    return provenance.measurement_key(tuple(code_paths), numba.get_num_threads(), clock_name())
+
+
 def host_info() -> dict:
     import numba
 
