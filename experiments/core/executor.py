@@ -18,7 +18,7 @@ def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
     """Measure one sweep point from its spec (on a worker, or locally with the client's ``scene``
     and reference structure). Returns (spec, rows); every row carries the worker's measurement key."""
     from experiments.core.point import measure
-    from tracer.provenance import measurement_key
+    from tracer.timing import measurement_key
     from tracer.rays import make_rays
     from tracer.scene import load_scene
     from tracer.timing import MIN_SAMPLE_SECONDS, set_threads
@@ -99,7 +99,8 @@ def _from_refs(args):
 def remote_task(fn, args, threads, models, code, clock_env=None):
     """Run ``fn(*args)`` on a worker with the client's thread count, models location and clock
     setting; returns (result, the worker's measurement key, its host)."""
-    from tracer.provenance import host, measurement_key
+    from tracer.provenance import host
+    from tracer.timing import measurement_key
     from tracer.timing import set_threads
     if models:
         os.environ["GRIDCOST_MODELS"] = models

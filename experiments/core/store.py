@@ -129,7 +129,7 @@ class Ledger:
 
 class PointStore:
     """One JSON file per measured point, named by the point's parameters and holding the
-    measurement key (:func:`tracer.provenance.measurement_key`: code digest, threads, clock, CPU,
+    measurement key (:func:`tracer.timing.measurement_key`: code digest, threads, clock, CPU,
     library versions) and the provenance (commit, host, clock, time) of the measurement.
 
     A stored point whose key differs from the current one (other code, threads, clock, CPU) is
@@ -152,7 +152,7 @@ class PointStore:
 
     @property
     def measurement_key(self) -> dict:
-        from tracer.provenance import measurement_key
+        from tracer.timing import measurement_key
         return measurement_key(self.code)
 
     @staticmethod
