@@ -157,10 +157,7 @@ def add_arguments(p) -> None:
 
 
 def load_any(name: str):
-    """A named scene: SPD (``sphereflake-2``), procedural or MANIFEST; or a mesh path."""
-    from tracer import spd
-    if spd.matches(name):
-        return spd.spd_scene(name)
+    """A named scene (mesh, procedural or SPD: one registry, :func:`tracer.scene.load_scene`) or a path."""
     from tracer.scene import load_scene
     return load_scene(name)
 
