@@ -9,26 +9,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import time
+
+from experiments.core.store import atomic_write
 
 
 def add_arguments(parser) -> None:  # noqa: ARG001 - the common options are all this target needs
     """No target-specific options."""
-
-
-def _atomic_write(path: str, text: str) -> None:
-    d = os.path.dirname(path) or "."
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=os.path.basename(path))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def _flag(ok) -> str:
@@ -97,10 +84,12 @@ def render_markdown(report: dict) -> str:
 def main(ctx, args) -> int:
     from costmodel.derive_nested import report as derive_report
 
+    started = time.time()
     rep = derive_report()
     outdir = os.path.join(getattr(args, "out", None) or "results", "derive")
-    _atomic_write(os.path.join(outdir, "derive.json"), json.dumps(rep, indent=2) + "\n")
-    _atomic_write(os.path.join(outdir, "summary.md"), render_markdown(rep))
+    atomic_write(os.path.join(outdir, "derive.json"), json.dumps(rep, indent=2) + "\n")
+    atomic_write(os.path.join(outdir, "summary.md"), render_markdown(rep))
+    ctx.write_meta(outdir, "derive", started, models=len(rep["models"]))
     if getattr(args, "json", False):
         print(json.dumps(rep))
     else:
