@@ -48,11 +48,14 @@ def _jsonable(x):
 
 
 def git_commit() -> str:
-    """Short commit of the working tree, with ``-dirty`` when tracked files differ from it."""
+    """Short commit of the working tree, with ``-dirty`` when tracked code (anything but the outputs
+    results/ and paper_figs/) differs from it."""
     try:
         out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True,
                              text=True, timeout=10)
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=REPO,
+        # outputs (results/, paper_figs/) do not make the code dirty: a run writes them as it goes
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                ":(exclude)results", ":(exclude)paper_figs"], cwd=REPO,
                                capture_output=True, text=True, timeout=10).stdout.strip()
         return out.stdout.strip() + ("-dirty" if dirty else "") if out.returncode == 0 else "unknown"
     except (OSError, subprocess.SubprocessError):
