@@ -20,7 +20,7 @@ def add_arguments(p) -> None:
 
 def _load(ctx, args, target):
     path = Path(args.out) / target / f"{target}.csv"
-    if not path.exists() or args.force:
+    if not path.exists():  # --force on a derived target re-derives; it does not re-measure its inputs
         import importlib
         mod = importlib.import_module(f"experiments.ize.{target}")
         sub = argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None, "seed": 0})
