@@ -52,7 +52,7 @@ def nblocks(m):
 
 
 @jit(inline="always")
-def store_ray(out_t, out_id, counters, i, t, tid, setups, steps, tests, nodes, skips):
+def store_ray(out_t, out_id, counters, i, t, tid, setups, steps, tests, nodes, skips, occupied=0):
     """Write ray i's result and, when ``counters`` is an array (not None), its counters in the
     column order of :data:`tracer.accel.COUNTER_NAMES`."""
     out_t[i] = t
@@ -63,3 +63,4 @@ def store_ray(out_t, out_id, counters, i, t, tid, setups, steps, tests, nodes, s
         counters[i, 2] = tests
         counters[i, 3] = nodes
         counters[i, 4] = skips
+        counters[i, 5] = occupied

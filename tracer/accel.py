@@ -21,7 +21,7 @@ import numpy as np
 from tracer.errors import GridcostError
 
 #: per-ray counter columns shared by all structures (a structure leaves the ones it lacks at 0)
-COUNTER_NAMES = ("setups", "steps", "tests", "nodes", "skips")
+COUNTER_NAMES = ("setups", "steps", "tests", "nodes", "skips", "occupied")
 
 #: structure name -> "module:Class"
 STRUCTURES = {
@@ -41,7 +41,7 @@ class Hits(NamedTuple):
 
 
 class Counters:
-    """Per-ray work counters, an ``(m, 5)`` int32 array with columns :data:`COUNTER_NAMES`."""
+    """Per-ray work counters, an ``(m, len(COUNTER_NAMES))`` int32 array with columns :data:`COUNTER_NAMES`."""
 
     def __init__(self, data: np.ndarray):
         self.data = data

@@ -173,13 +173,14 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
              cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None, tvi=None):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
 
-    Returns (t, tri_id, setups, steps, tests, skips, jumps). ``mb`` is the (chunks, MAILBOX) mailbox
+    Returns (t, tri_id, setups, steps, tests, skips, jumps, occupied); ``occupied`` counts the
+    visited cells that hold at least one reference (the steps that load a reference list). ``mb`` is the (chunks, MAILBOX) mailbox
     array or None (mailboxing compiled out). ``macro`` is the macrocell occupancy (blocks of
     2^mshift cells per axis, uint8, x fastest) or None: entering a cell of an empty block, the ray
     jumps to the block's exit and the DDA is set up again there."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, tmax)
     if t0 > t1:
-        return INF, -1, 0, 0, 0, 0, 0
+        return INF, -1, 0, 0, 0, 0, 0, 0
     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
         ox, oy, oz, dx, dy, dz, t0, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
         gp[6], gp[7], gp[8], nx, ny, nz)
@@ -196,6 +197,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
     tests = 0
     skips = 0
     jumps = 0
+    occupied = 0
     tjump = -INF
     bnx = ((nx - 1) >> mshift) + 1
     bny = ((ny - 1) >> mshift) + 1
@@ -229,6 +231,8 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
             if (occ[cu >> np.uintp(3)] >> (cu & np.uintp(7))) & 1:
                 r0 = cell_start[cu]
                 r1 = cell_start[cu + np.uintp(1)]
+        if r1 > r0:
+            occupied += 1
         for r in range(r0, r1):
             ru = np.uintp(r)
             if mb is not None:
@@ -250,7 +254,7 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                 best = t
                 best_ref = r
                 if anyhit:
-                    return best, tri_ids[ru], 1, steps, tests, skips, jumps
+                    return best, tri_ids[ru], 1, steps, tests, skips, jumps, occupied
         # leave the cell through its nearest plane (stops at a hit before it, or at the grid's end)
         axis, c, lx, ly, lz, tnx, tny, tnz, _ = dda_step(c, lx, ly, lz, cdx, cdy, cdz, tnx, tny, tnz,
                                                          tdx, tdy, tdz, best, INF)
@@ -264,8 +268,8 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
             else:
                 iz += sz
     if best_ref < 0:
-        return INF, -1, 1, steps, tests, skips, jumps
-    return best, tri_ids[np.uintp(best_ref)], 1, steps, tests, skips, jumps
+        return INF, -1, 1, steps, tests, skips, jumps, occupied
+    return best, tri_ids[np.uintp(best_ref)], 1, steps, tests, skips, jumps, occupied
 
 
 @pjit
@@ -278,11 +282,11 @@ def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv
     for th in prange(nt):
         for b in range(th, nblocks(m), nt):
             for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
-                t, tid, su, st, te, sk, ju = grid_ray(
+                t, tid, su, st, te, sk, ju, oc = grid_ray(
                     np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                     np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
                     anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ, tvi)
-                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, ju, sk)
+                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, ju, sk, oc)
 
 
 def macro_occupancy(cell_start, res, k: int) -> np.ndarray:

@@ -118,11 +118,12 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
 
     ``sti``/``stf`` are the (levels, 7) int and (levels, 7) float stacks of suspended DDA states; ``lvl`` is the
     (m, levels, 3) per-level counter array or None (compiled out). Returns
-    (t, tri_id, setups, steps, tests, nodes)."""
+    (t, tri_id, setups, steps, tests, nodes, occupied): ``occupied`` counts the visited leaf cells that
+    hold at least one reference."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, GF[0, 0], GF[0, 1], GF[0, 2], GF[0, 9], GF[0, 10],
                      GF[0, 11], tmin, tmax)
     if t0 > t1:
-        return INF, -1, 0, 0, 0, 0
+        return INF, -1, 0, 0, 0, 0, 0
     depth = 0
     ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
         ox, oy, oz, dx, dy, dz, t0, GF[0, 0], GF[0, 1], GF[0, 2], GF[0, 3], GF[0, 4], GF[0, 5],
@@ -136,6 +137,7 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
     steps = 0
     tests = 0
     nodes = 0
+    occupied = 0
     if lvl is not None:
         lvl[ray, 0, 0] += 1
     best = np.float64(tmax)
@@ -168,6 +170,8 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
             if lvl is not None:
                 lvl[ray, depth, 0] += 1
             continue
+        if b > a:
+            occupied += 1
         for r in range(a, b):
             ru = np.uintp(r)
             tests += 1
@@ -180,7 +184,7 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
                 if anyhit:
                     if lvl is not None:
                         lvl[ray, depth, 2] += r - a + 1
-                    return best, best_id, setups, steps, tests, nodes
+                    return best, best_id, setups, steps, tests, nodes, occupied
         if lvl is not None:
             lvl[ray, depth, 2] += b - a if b > a else 0
         # step to the next cell (tenter: its entry, where a child grid's DDA starts); a grid whose
@@ -204,25 +208,25 @@ def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_id
             break
     if best_id < 0:
         best = INF
-    return best, best_id, setups, steps, tests, nodes
+    return best, best_id, setups, steps, tests, nodes, occupied
 
 
 @pjit
 def nested_trace(O, D, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv, levels,
                  out_t, out_id, counters, lvl, nt):
     """Batched nested-grid traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer._jit.BLOCK`), one DDA-state stack per
-    thread. ``counters`` (m, 5) and ``lvl`` (m, levels, 3) are arrays or None (compiled out)."""
+    thread. ``counters`` (m, len(COUNTER_NAMES)) and ``lvl`` (m, levels, 3) are arrays or None (compiled out)."""
     m = O.shape[0]
     for th in prange(nt):
         sti = np.empty((levels, 7), np.int64)
         stf = np.empty((levels, 7), np.float64)
         for b in range(th, nblocks(m), nt):
             for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
-                t, tid, su, st, te, no = nested_ray(
+                t, tid, su, st, te, no, oc = nested_ray(
                     np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                     np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
                     anyhit, GF, GI, cells, tri_ids, tv, sti, stf, lvl, i)
-                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, no, 0)
+                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, no, 0, oc)
 
 
 # ---------------------------------------------------------------- the structure

@@ -327,7 +327,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
         s_tests = 0
         for q in range(ns):
             i = I[_SINGLE, q]
-            t, tid, su_, st_, te_, sk_, ju_ = grid_ray(
+            t, tid, su_, st_, te_, sk_, ju_, oc_ = grid_ray(
                 np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]), np.float64(D[i, 0]),
                 np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit, gp,
                 nxg, nyg, nzg, cell_start, tri_ids, tv, None, 0, None, 0)

@@ -1,0 +1,49 @@
+"""The memory-aware cost model in the Ize tables: its M for a held-out scene, and the model chosen per
+scene (:mod:`costmodel.memory`).
+
+For a scene of a table, the model's constants are fitted on the *other* scenes swept in the same run
+(same ray kind; Tsetup per scene, Ts0, Ti and kappa pooled) with the host's load-latency curve
+(:class:`tracer.machine.MachineModel`); its M is the minimum of the prediction over the scene's
+counters (counted at the swept M, interpolated between them). With a single scene in the run the fit
+is the scene's own (marked ``in-sample``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from costmodel.memory import MemoryCostFit, model_optimum
+
+_MACHINE = {}
+
+
+def machine(quick: bool = False, log=None):
+    """The host's machine model, loaded (or probed) once per process."""
+    from tracer.machine import MachineModel
+    if quick not in _MACHINE:
+        _MACHINE[quick] = MachineModel.load(quick=quick, log=log)
+    return _MACHINE[quick]
+
+
+def grid_rows(df: pd.DataFrame, kind: str) -> pd.DataFrame:
+    d = df[(df.ray_kind == kind) & (df.structure == "grid")]
+    return d.drop_duplicates(["scene", "cells"])
+
+
+def memory_aware_cells(df: pd.DataFrame, scene: str, kind: str, mach) -> tuple[float, str]:
+    """(M, how): the memory-aware model's M for ``scene`` from the other scenes' sweeps of ``df``."""
+    d = grid_rows(df, kind)
+    test = d[d.scene == scene]
+    train = d[d.scene != scene]
+    how = "held-out"
+    if train.scene.nunique() == 0:
+        train, how = test, "in-sample"
+    fit = MemoryCostFit(mach).fit(train, train.anchored_ns_per_ray)
+    return model_optimum(fit, test), how
+
+
+def working_set_note(rows: pd.DataFrame, mach) -> str:
+    """Largest grid working set of a scene's sweep against the caches (for the model-choice reading)."""
+    mx = float(np.nanmax(rows.memory_bytes))
+    l2 = mach.caches_.get("L2", 0)
+    return f"{mx / 2**20:.1f} MiB largest swept grid ({'over' if mx > l2 else 'within'} L2 {l2 >> 20} MiB)"

@@ -1,0 +1,77 @@
+"""The memory-aware cost model: its sympy equations, its fit, the machine model and the occupied counter."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from costmodel import memory as mm
+from tracer.accel import build
+from tracer.machine import MachineModel, chase_ns
+from tracer.rays import make_rays
+from tracer.scene import load_scene
+
+
+def test_one_level_optimum_closed_form_and_paper_limit():
+    r = mm.memory_eq_one_level_optimum()
+    assert r["as_stated"] and r["limit_is_eq4"]
+    # numeric: Lambda = K = 0 gives 2 N Ti / Ts0 (= 8N for Ti/Ts0 = 4)
+    f = r["M"].subs({mm.Lam: 0, mm.K: 0, mm.Ti: 4, mm.Ts0: 1, mm.N: 1000})
+    assert float(f) == pytest.approx(8000)
+
+
+def test_long_skinny_cubic_and_paper_limit():
+    r = mm.memory_eq_long_skinny_optimum()
+    assert r["as_stated"] and r["limit_is_eq8"]
+    assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 0.0, 0.0) == pytest.approx(8 * 1000**1.5, rel=1e-9)
+    # a positive K (memory cost falling with M inside the band) moves the optimum
+    assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 0.0, 50_000.0) < 0.99 * 8 * 1000**1.5
+
+
+def _fake_machine():
+    b = [4096 * 2**i for i in range(16)]
+    lat = [1.0 if x <= 32 << 10 else (5.0 if x <= 1 << 20 else 80.0) for x in b]
+    lat[3] = 0.5  # a dip the model must smooth away (non-decreasing)
+    return MachineModel({"bytes": b, "latency_ns": lat, "caches": {"L1": 32 << 10, "L2": 1 << 20, "L3": 8 << 20},
+                         "host": "h", "cpu": "c"})
+
+
+def test_machine_model_is_monotone_and_extra_is_zero_in_l1():
+    m = _fake_machine()
+    assert np.all(np.diff(m.latency_) >= 0)
+    assert m.extra_ns(8192) == 0.0
+    assert m.extra_ns(64 << 20) == pytest.approx(79.0)
+
+
+def test_memory_fit_recovers_constants():
+    rng = np.random.default_rng(0)
+    mach = _fake_machine()
+    rows = []
+    for s, n in (("a", 1000), ("b", 5000), ("c", 20000)):
+        for cells in np.geomspace(n / 8, 64 * n, 9):
+            steps, tests = 2 * cells ** (1 / 3), 4 * n / cells ** (2 / 3) + 1
+            rows.append({"scene": s, "cells": cells, "steps": steps, "tests": tests, "occupied": 0.3 * steps,
+                         "memory_bytes": 4 * cells + 60 * n})
+    f = pd.DataFrame(rows)
+    true = 50 + 3.0 * f.steps + 12.0 * f.tests + 0.4 * mm.memory_feature(mach, f.steps, f.occupied, f.cells, f.memory_bytes)
+    T = true * (1 + 0.002 * rng.standard_normal(len(f)))
+    fit = mm.MemoryCostFit(mach).fit(f, T)
+    assert fit.ts0_ == pytest.approx(3.0, rel=0.1) and fit.ti_ == pytest.approx(12.0, rel=0.1)
+    assert fit.kappa_ == pytest.approx(0.4, rel=0.1)
+    # without the memory term the fit is worse on these data
+    assert mm.MemoryCostFit(mach, memory=False).fit(f, T).metrics_["mape"] > fit.metrics_["mape"]
+    m_opt = mm.model_optimum(fit, f[f.scene == "c"])
+    assert f[f.scene == "c"].cells.min() <= m_opt <= f[f.scene == "c"].cells.max()
+
+
+def test_chase_probe_runs_and_is_positive():
+    assert chase_ns(8192, accesses=20_000, repeats=1) > 0
+
+
+@pytest.mark.parametrize("structure,params", [("grid", {"factor": 2.0}), ("nested", {})])
+def test_occupied_counter(structure, params):
+    scene = load_scene("bunny-948")
+    r = make_rays(scene, "random", 2000, seed=1)
+    _, cnt = build(scene, structure, **params).intersect(r.origins, r.directions)
+    occ, steps, tests = cnt["occupied"], cnt["steps"], cnt["tests"]
+    assert (occ <= steps).all() and (occ <= tests).all()
+    assert ((occ > 0) == (tests > 0)).all()
+    assert occ.sum() > 0 and (occ < steps).any()
