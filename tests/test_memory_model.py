@@ -23,7 +23,8 @@ def test_long_skinny_cubic_and_paper_limit():
     assert r["as_stated"] and r["limit_is_eq8"]
     assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 0.0, 0.0) == pytest.approx(8 * 1000**1.5, rel=1e-9)
     # a positive K (memory cost falling with M inside the band) moves the optimum
-    assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 0.0, 50_000.0) < 0.99 * 8 * 1000**1.5
+    assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 1.0, 0.0) == pytest.approx((4000 / 2) ** 1.5)
+    assert mm.long_skinny_optimum_numeric(1000, 4.0, 1.0, 1.0, 10_000.0) < 0.99 * (4000 / 2) ** 1.5
 
 
 def _fake_machine():
