@@ -11,10 +11,10 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments.ize import memprobe
+from experiments.ize import memmodel, memprobe
 from experiments.core.common import scene_list
 from experiments.core.store import atomic_write
-from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, sweep
+from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
 from tracer.memory import cache_bytes
 from tracer.rays import make_rays
 from tracer.scene import load_scene
@@ -67,10 +67,14 @@ def run(ctx, args, log=print) -> dict:
     # one (Ts, Ti) pair for all cylinders, or one per cylinder? (AIC, as table2)
     pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
     scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
+    # the memory-aware model's M per cylinder and kind, constants from the other cylinders (memmodel)
+    mach = memmodel.machine(quick, log=log)
+    mem_m = {(name, kind): memmodel.memory_aware_cells(df, name, kind, mach) for name in scenes for kind in KINDS}
     extra = []
     for name, scene in scenes.items():
         k = df[(df.scene == name) & (df.ray_kind == "random")]
-        pts = [refine_minimum(k.cells, k.anchored_ns_per_ray), (scene.n * ratio) ** 1.5]
+        pts = [refine_minimum(k.cells, k.anchored_ns_per_ray), (scene.n * ratio) ** 1.5,
+               *(mem_m[(name, kind)][0] for kind in KINDS)]
         if np.isfinite(scene_ratio[name]) and scene_ratio[name] > 0:
             pts.append((scene.n * scene_ratio[name]) ** 1.5)
         extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in pts], rays[name], store, repeats,
@@ -96,9 +100,11 @@ def run(ctx, args, log=print) -> dict:
             # theory (8N^1.5) and fitted M re-timed side by side with the three fastest swept M and M = 8N
             sr = scene_ratio[name]
             fs = nearest(k, (scene.n * sr) ** 1.5) if np.isfinite(sr) and sr > 0 else fi
+            fm = nearest(k, mem_m[(name, kind)][0])
             pp = paired_penalties(scene, "grid", {"theory": {"cells": float(th.param_cells)},
                                                   "fitted": {"cells": float(fi.param_cells)},
-                                                  "scene_fit": {"cells": float(fs.param_cells)}},
+                                                  "scene_fit": {"cells": float(fs.param_cells)},
+                                                  "memory": {"cells": float(fm.param_cells)}},
                                   [{"cells": c} for c in fastest(k, 3)], rays[name][kind], store,
                                   quick=quick, others={"8N": ("grid", {"cells": float(lin.param_cells)})})
             e.update({f"empirical_M{sfx}": int(best.cells), f"theory_M{sfx}": int(th.cells),
@@ -107,6 +113,8 @@ def run(ctx, args, log=print) -> dict:
                       f"fitted_M{sfx}": int(fi.cells), f"penalty_fitted_pct{sfx}": pp["fitted"]["penalty_pct"],
                       f"scene_ti_over_ts{sfx}": sr, f"scene_fit_M{sfx}": int(fs.cells),
                       f"penalty_scene_pct{sfx}": pp["scene_fit"]["penalty_pct"],
+                      f"memory_M{sfx}": int(fm.cells), f"penalty_memory_pct{sfx}": pp["memory"]["penalty_pct"],
+                      f"penalty_memory_range{sfx}": penalty_range(pp["memory"]), f"memory_fit{sfx}": mem_m[(name, kind)][1],
                       f"speedup_vs_8N{sfx}": pp["theory"]["speedup"]["8N"],
                       f"size_vs_8N{sfx}": th.cells / lin.cells,
                       f"memory_vs_8N{sfx}": th.memory_bytes / lin.memory_bytes,
@@ -142,12 +150,15 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
                 if pool["per_scene"] else "the pooled pair is enough."), "",
              "| N | empirical M ours (paper) | M = 8N^1.5, penalty ours (paper) | fitted M (pooled), penalty | "
              "per-cylinder fit: Ti/Ts, M, penalty | "
+             "memory-aware M, penalty (random / camera) | "
              "speed-up over 8N ours (paper) | size over 8N in cells, ours (paper) | memory over 8N | memory | camera: empirical M, penalty |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
         lines.append(f"| {r.N:,} | {f(r.empirical_M)} ({f(r.paper_empirical_M)}) | {f(r.theory_M)}, {r.penalty_pct:.1f}% "
                      f"({r.paper_penalty_pct}%) | {f(r.fitted_M)}, {r.penalty_fitted_pct:.1f}% | "
-                     f"{r.scene_ti_over_ts:.2f}, {f(r.scene_fit_M)}, {r.penalty_scene_pct:.1f}% | {r.speedup_vs_8N:.2f}x "
+                     f"{r.scene_ti_over_ts:.2f}, {f(r.scene_fit_M)}, {r.penalty_scene_pct:.1f}% | "
+                     f"{f(r.memory_M)}, {r.penalty_memory_pct:.1f}% [{r.penalty_memory_range}] / {f(r.memory_M_camera)}, "
+                     f"{r.penalty_memory_pct_camera:.1f}% | {r.speedup_vs_8N:.2f}x "
                      f"({r.paper_speedup}x) | {r.size_vs_8N:.1f}x ({r.paper_size}x) | {r.memory_vs_8N:.1f}x | {r.memory_MiB:.1f} MiB | "
                      f"{f(r.empirical_M_camera)}, {r.penalty_pct_camera:.1f}% |")
     lines += ["", "Eq 5 (long-skinny) vs Eq 1 (compact) fit of the same sweeps — the skinny model should fit better:", "",
@@ -188,7 +199,12 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
               "Our cylinder is built as the paper's (N/4 segments, sides spanning the height, fan caps), but with "
               "radius 1 and height 2: the paper does not give its proportions, so absolute M may differ. The speed-up over "
               "M = 8N and the memory blow-up are the trade-off the paper describes: super-linear memory buys "
-              "sub-linear time, less of it here, since the memory itself costs time."]
+              "sub-linear time, less of it here, since the memory itself costs time.", "",
+              "The memory-aware column prices that traffic instead of absorbing it: the counter model plus the host's "
+              "measured load latency at each grid's working set (`costmodel/memory.py`, `tracer/machine.py`), constants "
+              f"fitted on the other cylinders of this run ({tab.memory_fit.iloc[0]}); its M costs "
+              f"{tab.penalty_memory_pct.max():.1f} % (random) and {tab.penalty_memory_pct_camera.max():.1f} % (camera) "
+              "over the best at worst."]
     return "\n".join(lines) + "\n"
 
 
