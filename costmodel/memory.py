@@ -197,3 +197,23 @@ def model_optimum(fit, frame, points: int = 200) -> float:
     grid = np.geomspace(lo, hi, points)
     pred = fit.work(interpolate_counters(frame, grid))
     return float(grid[int(np.argmin(pred))])
+
+
+class PaperCountFit(MemoryCostFit):
+    """Ize's count model with the paper's ratio fixed: T_ray = Tsetup[scene] + b (steps + 4 tests);
+    one shared constant b (the time of a step) besides the set-ups."""
+
+    def __init__(self, ti_over_ts: float = 4.0):
+        super().__init__(None, memory=False)
+        self.ti_over_ts = ti_over_ts
+
+    def _design(self, frame):
+        X, cats = super()._design(frame)
+        X[:, -3] = X[:, -3] + self.ti_over_ts * X[:, -2]
+        X[:, -2] = 0.0
+        return X, cats
+
+    def fit(self, frame, T):
+        super().fit(frame, T)
+        self.n_constants_ = len(self.scenes_) + 1
+        return self

@@ -1,8 +1,32 @@
-"""``predict``: cross-scene prediction with the counter cost model. For each scene of the table2
-sweeps held out in turn, fit T = Tsetup + Ts·steps + Ti·tests on the other scenes (one pooled Ts, Ti),
-predict the held-out runtime curve from its counters (Tsetup: mean of the training scenes, or
-calibrated on one measured point), report MAPE per held-out scene and the penalty of the predicted
-optimum M; then chart prediction error against calibration cost (scenes and sweep points used)."""
+"""``predict``: how well each cost model predicts a scene it has not seen, what that costs to
+calibrate, and which model each scene needs.
+
+Data: every one-level grid sweep of this results folder with random rays — table2 (the five
+Table 2 scenes), table3 (the capped cylinders) and exponents (compact scans, open cylinders and
+particles, about 1k to 871k faces); a scene swept by two targets is one scene (its sweeps keep
+their own set-up constant, since their ray sets differ).
+
+Models (:mod:`costmodel.memory`), simplest first:
+
+1. **paper** — Ize's count model with Ti/Ts = 4: T = Tsetup + b (steps + 4 tests), b pooled;
+2. **counter** — T = Tsetup + Ts steps + Ti tests, Ts and Ti pooled (:class:`MemoryCostFit`, no memory term);
+3. **memory-aware** — the counter model plus kappa (steps x(B_cells) + occupied x(B_data)), x(B)
+   the host's load latency at working set B over an L1 hit (:class:`tracer.machine.MachineModel`);
+4. **per-scene** — the counter model fitted on the scene's own sweep (needs the sweep itself).
+
+Held-out error: leave one scene out; the pooled constants are fitted on the other scenes, the
+held-out scene's Tsetup on one measured point (its median-M point: "one calibration point"), and
+the MAPE is taken over its other points. The per-scene model is scored leave-one-point-out on its
+own sweep. The penalty of a model's M is the measured time at the swept M its prediction puts
+lowest, over the sweep's minimum.
+
+Calibration cost (the x of the speed-against-accuracy chart): the machine seconds of measuring the
+points a model is fitted on — per point its build plus 12 traces (warm-up and 5 rounds, each
+beside the reference grid) — plus, for the memory-aware model, the host probe's seconds.
+
+Model choice per scene: the simplest model whose held-out MAPE is within ``TOLERANCE_PP``
+percentage points of the scene's best; over all scenes, AIC of the in-sample fits.
+"""
 from __future__ import annotations
 
 import argparse
@@ -14,112 +38,257 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from costmodel.fit import CounterCostFit
+from costmodel.memory import MemoryCostFit, PaperCountFit, aic
 from experiments.core.store import atomic_write
+from experiments.ize import memmodel
+from tracer.errors import GridcostError
+
+SOURCES = (("table2", "table2/table2.csv"), ("table3", "table3/table3.csv"), ("exponents", "exponents/points.csv"))
+MODELS = ("paper", "counter", "memory-aware", "per-scene")
+#: a simpler model is chosen when its held-out MAPE is within this many percentage points of the best
+TOLERANCE_PP = 1.0
+#: traces per measured point (warm-up + 5 rounds, point and reference)
+TRACES_PER_POINT = 12
 
 
 def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--reps", type=int, default=None, help="random calibration draws per chart point (default 10; --quick 3)")
 
 
-def _rows(ctx, args) -> pd.DataFrame:
-    path = Path(args.out) / "table2" / "table2.csv"
-    if not path.exists():
+def load_sweeps(ctx, args) -> pd.DataFrame:
+    """The random-ray one-level grid sweeps of this results folder (table2 is measured when missing)."""
+    out = Path(args.out)
+    if not (out / SOURCES[0][1]).exists():
         from experiments.ize import table2 as ize_table2
         ize_table2.run(ctx, argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None}),
                        log=lambda *a: None)
-    return pd.read_csv(path)
+    frames = []
+    for src, rel in SOURCES:
+        if (out / rel).exists():
+            d = pd.read_csv(out / rel)
+            if "occupied" not in d:
+                raise GridcostError(f"{out / rel} has no 'occupied' counter (made by an older gridcost): "
+                                    f"re-run `gridcost {src}`")
+            frames.append(d.assign(source=src))
+    df = pd.concat(frames, ignore_index=True)
+    df = df[(df.ray_kind == "random") & (df.structure == "grid")].copy()
+    df = df.drop_duplicates(["source", "scene", "cells"]).reset_index(drop=True)
+    df["sweep"] = df.source + ":" + df.scene
+    df["point_seconds"] = df.build_s + TRACES_PER_POINT * df.seconds_raw
+    return df
 
 
-def holdout(df: pd.DataFrame, test: str, train: list[str], points: int | None = None, seed: int = 0,
-            calibrate_setup: bool = True) -> dict:
-    rng = np.random.default_rng(seed)
-    tr = df[df.scene.isin(train)]
+def _frame(d: pd.DataFrame) -> pd.DataFrame:
+    """The model's view of rows: one Tsetup per sweep."""
+    return d.assign(scene=d.sweep)
+
+
+def _model(name: str, mach):
+    return {"paper": lambda: PaperCountFit(), "counter": lambda: MemoryCostFit(mach, memory=False),
+            "memory-aware": lambda: MemoryCostFit(mach)}[name]()
+
+
+def _score(fit, te: pd.DataFrame) -> tuple[list, list]:
+    """(absolute percentage errors, per-sweep penalties of the predicted M) of ``fit`` on the sweeps
+    of one held-out scene, Tsetup from each sweep's median-M point."""
+    apes, pens = [], []
+    for _, g in te.groupby("sweep"):
+        g = g.sort_values("cells")
+        T = g.anchored_ns_per_ray.to_numpy(float)
+        work = fit.work(_frame(g))
+        j = len(g) // 2
+        pred = T[j] - work[j] + work
+        apes += list(np.abs(np.delete(pred, j) - np.delete(T, j)) / np.delete(T, j))
+        pens.append(100.0 * (T[int(np.argmin(pred))] / T.min() - 1.0))
+    return apes, pens
+
+
+def holdout(df, scene, train_scenes, model, mach, points=None, rng=None) -> dict:
+    """One held-out scene with a pooled model fitted on ``train_scenes`` (``points`` per sweep)."""
+    tr = df[df.scene.isin(train_scenes)]
     if points:
         keep = []
-        for _, g in tr.groupby("scene"):
+        for _, g in tr.groupby("sweep"):
             keep += list(g.index[np.sort(rng.choice(len(g), min(points, len(g)), replace=False))])
         tr = tr.loc[keep]
-    fit = CounterCostFit(n_boot=0).fit(tr.scene.tolist(), tr.steps, tr.tests, tr.anchored_ns_per_ray)
-    te = df[df.scene == test].sort_values("cells")
-    work = fit.ts_ * te.steps.values + fit.ti_ * te.tests.values
-    if calibrate_setup:  # one measured point of the new scene (its median-M point) fixes Tsetup
-        j = len(te) // 2
-        setup = te.anchored_ns_per_ray.values[j] - work[j]
-    else:
-        setup = float(np.mean(list(fit.tsetup_.values())))
-    pred = setup + work
-    ape = np.abs(pred - te.anchored_ns_per_ray.values) / te.anchored_ns_per_ray.values
-    i_pred = int(np.argmin(pred))
-    return {"scene": test, "train": ",".join(train), "points": points or "all", "mape_pct": float(ape.mean() * 100),
-            "m_pred": float(te.cells.values[i_pred]), "m_best": float(te.cells.values[np.argmin(te.anchored_ns_per_ray.values)]),
-            "penalty_pct": float(100 * (te.anchored_ns_per_ray.values[i_pred] / te.anchored_ns_per_ray.min() - 1)),
-            "ts": fit.ts_, "ti": fit.ti_, "calibrated_setup": calibrate_setup}
+    fit = _model(model, mach).fit(_frame(tr), tr.anchored_ns_per_ray)
+    te = df[df.scene == scene]
+    apes, pens = _score(fit, te)
+    cost = tr.point_seconds.sum() + te.groupby("sweep").point_seconds.median().sum()
+    if model == "memory-aware":
+        cost += mach.data.get("probe_seconds", 0.0)
+    return {"scene": scene, "model": model, "n_train": len(train_scenes), "points": points or "all",
+            "mape_pct": 100 * float(np.mean(apes)), "penalty_pct": float(np.max(pens)), "calibration_s": float(cost),
+            "ts0_ns": fit.ts0_, "ti_ns": fit.ti_, "kappa": fit.kappa_}
+
+
+def per_scene(df, scene, mach) -> dict:
+    """The counter model fitted on the scene's own sweep, scored leave-one-point-out."""
+    te = df[df.scene == scene]
+    apes, pens = [], []
+    for _, g in te.groupby("sweep"):
+        g = g.sort_values("cells").reset_index(drop=True)
+        T = g.anchored_ns_per_ray.to_numpy(float)
+        for j in range(len(g)):
+            tr = g.drop(index=j)
+            fit = MemoryCostFit(mach, memory=False).fit(_frame(tr), tr.anchored_ns_per_ray)
+            apes.append(abs(fit.predict(_frame(g.iloc[[j]]), setup=fit.tsetup_[g.sweep.iloc[0]])[0] - T[j]) / T[j])
+        full = MemoryCostFit(mach, memory=False).fit(_frame(g), T)
+        pens.append(100.0 * (T[int(np.argmin(full.work(_frame(g))))] / T.min() - 1.0))
+    return {"scene": scene, "model": "per-scene", "n_train": 0, "points": "own sweep",
+            "mape_pct": 100 * float(np.mean(apes)), "penalty_pct": float(np.max(pens)),
+            "calibration_s": float(te.point_seconds.sum()), "ts0_ns": np.nan, "ti_ns": np.nan, "kappa": np.nan}
+
+
+def choose(loo: pd.DataFrame) -> pd.DataFrame:
+    """Per scene: the simplest model within TOLERANCE_PP of the best held-out MAPE."""
+    rows = []
+    for scene, g in loo.groupby("scene", sort=False):
+        m = g.set_index("model").mape_pct
+        best = m.min()
+        pick = next(k for k in MODELS if k in m and m[k] <= best + TOLERANCE_PP)
+        rows.append({"scene": scene, **{f"mape_{k}": m.get(k, np.nan) for k in MODELS}, "chosen": pick,
+                     "why": (f"simplest within {TOLERANCE_PP:g} pp of the best ({best:.1f} %)" if pick != m.idxmin()
+                             else "lowest held-out error")})
+    return pd.DataFrame(rows)
+
+
+def dataset_aic(df, mach) -> dict:
+    """AIC of each model fitted in-sample on every sweep (k = its constants)."""
+    out = {}
+    T = df.anchored_ns_per_ray.to_numpy(float)
+    for name in MODELS[:3]:
+        f = _model(name, mach).fit(_frame(df), T)
+        out[name] = aic(T, f.predict(_frame(df), setup=0.0) + _frame(df).scene.map(f.tsetup_).to_numpy(float),
+                        f.n_constants_)
+    pred = np.empty(len(df))
+    for _, g in df.groupby("sweep"):
+        f = MemoryCostFit(mach, memory=False).fit(_frame(g), g.anchored_ns_per_ray)
+        pred[df.index.get_indexer(g.index)] = f.predict(_frame(g), setup=f.tsetup_[g.sweep.iloc[0]])
+    out["per-scene"] = aic(T, pred, 3 * df.sweep.nunique())
+    return out
+
+
+def speed_accuracy(df, scenes, mach, reps: int, seed: int) -> pd.DataFrame:
+    """Held-out error against calibration cost: each pooled model calibrated on 1, 3 or all other
+    scenes with 3 or all points per sweep (``reps`` random draws), and the per-scene fit."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for model in MODELS[:3]:
+        for n_train in sorted({1, min(3, len(scenes) - 1), len(scenes) - 1}):
+            for pts in (3, None):
+                for rep in range(reps if n_train < len(scenes) - 1 else 1):
+                    for scene in scenes:
+                        others = [s for s in scenes if s != scene]
+                        train = list(rng.choice(others, n_train, replace=False))
+                        rows.append({**holdout(df, scene, train, model, mach, pts, rng), "rep": rep})
+    rows += [per_scene(df, s, mach) for s in scenes]
+    r = pd.DataFrame(rows)
+    return (r.groupby(["model", "n_train", "points"], sort=False)
+            .agg(calibration_s=("calibration_s", "mean"), mape_pct=("mape_pct", "mean"),
+                 penalty_pct=("penalty_pct", "mean"), draws=("scene", "size")).reset_index())
+
+
+def pareto(x, y) -> np.ndarray:
+    """Mask of the points no other point beats on both cost and error."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    return np.array([not np.any((x <= x[i]) & (y <= y[i]) & ((x < x[i]) | (y < y[i]))) for i in range(len(x))])
 
 
 def main(ctx, args) -> int:
     started = time.time()
-    df = _rows(ctx, args)
-    df = df[(df.ray_kind == "random") & (df.structure == "grid")]
+    df = load_sweeps(ctx, args)
     scenes = list(dict.fromkeys(df.scene))
-    if len(scenes) < 2:
-        from tracer.errors import GridcostError
-        raise GridcostError("cross-scene prediction needs table2 sweeps of at least two scenes")
-    loo = [holdout(df, s, [t for t in scenes if t != s], calibrate_setup=c) for s in scenes for c in (True, False)]
-    loo = pd.DataFrame(loo)
-    # calibration cost: number of training scenes x sweep points per scene
-    rng = np.random.default_rng(args.seed)
-    cost = []
-    for c in range(1, len(scenes)):
-        for pts in (3, 5, 8, None):
-            for rep in range(10):
-                test = scenes[rep % len(scenes)]
-                others = [t for t in scenes if t != test]
-                train = list(rng.choice(others, c, replace=False))
-                r = holdout(df, test, train, pts, seed=rep)
-                cost.append({**r, "n_train": c, "rep": rep})
-    cost = pd.DataFrame(cost)
+    if len(scenes) < 3:
+        raise GridcostError("cross-scene prediction needs the sweeps of at least three scenes (table2, table3, exponents)")
+    mach = memmodel.machine(ctx.quick, log=print)
+    loo = pd.DataFrame([holdout(df, s, [t for t in scenes if t != s], m, mach) for s in scenes for m in MODELS[:3]]
+                       + [per_scene(df, s, mach) for s in scenes])
+    chosen = choose(loo)
+    ws = df.groupby("scene").memory_bytes.max()
+    chosen["largest_grid_MiB"] = chosen.scene.map(ws / 2**20)
+    chosen["N"] = chosen.scene.map(df.groupby("scene").N.first())
+    sa = speed_accuracy(df, scenes, mach, args.reps or (3 if ctx.quick else 10), args.seed)
+    for col in ("mape_pct", "penalty_pct"):
+        sa[f"pareto_{col.split('_')[0]}"] = pareto(sa.calibration_s, sa[col])
+    aics = dataset_aic(df, mach)
     out_dir = Path(args.out) / "predict"
     ctx.write_csv(out_dir / "loo.csv", loo)
-    ctx.write_csv(out_dir / "calibration_cost.csv", cost)
-    cal = loo[loo.calibrated_setup]
-    lines = ["# Cross-scene prediction with the counter cost model", "",
-             "Leave one scene out: Ts and Ti fitted on the other scenes' sweeps (random rays), the held-out runtime "
-             "curve predicted from its counters. 'one point' = Tsetup of the new scene from one measured point; "
-             "'none' = mean Tsetup of the training scenes.", "",
-             "| held-out scene | MAPE (one point) | MAPE (none) | predicted M | best M | penalty of predicted M |",
-             "|---|---|---|---|---|---|"]
-    for s in scenes:
-        a = loo[(loo.scene == s) & loo.calibrated_setup].iloc[0]
-        b = loo[(loo.scene == s) & ~loo.calibrated_setup].iloc[0]
-        lines.append(f"| {s} | {a.mape_pct:.1f}% | {b.mape_pct:.1f}% | {a.m_pred:,.0f} | {a.m_best:,.0f} | {a.penalty_pct:.1f}% |")
-    lines += ["", f"Mean MAPE over held-out scenes: {cal.mape_pct.mean():.1f} % (one calibration point), "
-              f"{loo[~loo.calibrated_setup].mape_pct.mean():.1f} % (none). Worst penalty of the predicted M: "
-              f"{cal.penalty_pct.max():.1f} %.", "",
-              "Speed vs accuracy: `paper_figs/predict.png` plots the held-out MAPE against the number of calibration "
-              "scenes and sweep points per scene (mean of 10 random choices)."]
-    md = "\n".join(lines) + "\n"
+    ctx.write_csv(out_dir / "model_choice.csv", chosen)
+    ctx.write_csv(out_dir / "speed_accuracy.csv", sa)
+    md = _summary(loo, chosen, sa, aics, mach, df)
     atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, cost)
-    ctx.write_meta(out_dir, "predict", started, scenes=scenes, seed=args.seed)
+    _figure(ctx, sa)
+    ctx.write_meta(out_dir, "predict", started, scenes=scenes, seed=args.seed, sources=sorted(df.source.unique()),
+                   machine=mach.data, aic=aics)
     if args.json:
-        json.dump({"loo": loo.to_dict(orient="records"), "mean_mape_pct": float(cal.mape_pct.mean())}, sys.stdout,
-                  default=float)
+        json.dump({"loo": loo.to_dict(orient="records"), "choice": chosen.to_dict(orient="records"), "aic": aics},
+                  sys.stdout, default=float)
         print()
     else:
         print(md)
     return 0
 
 
-def _figure(ctx, cost):
+def _summary(loo, chosen, sa, aics, mach, df) -> str:
+    mean = loo.groupby("model", sort=False).mape_pct.mean()
+    worst = loo.groupby("model", sort=False).penalty_pct.max()
+    lines = ["# Cross-scene prediction: four cost models, held out scene by scene", "",
+             f"Sweeps: {', '.join(sorted(df.source.unique()))} (random rays, one-level grids), {df.scene.nunique()} "
+             f"scenes, N = {df.N.min():,}–{df.N.max():,} faces. Machine: {mach.summary()}.", "",
+             "Each pooled model is fitted on every other scene; the held-out scene's Tsetup comes from one measured "
+             "point (its median-M point) and the error is the mean absolute percentage error over its other points "
+             "(time per ray). per-scene = the counter model fitted on the scene's own sweep, scored leave-one-point-out. "
+             "Penalty = measured time at the M the model predicts fastest over the sweep's fastest (%).", "",
+             "| model | constants fitted | mean held-out MAPE | worst penalty of its M |", "|---|---|---|---|",
+             f"| paper (Ti/Ts = 4) | b, Tsetup per scene | {mean['paper']:.1f}% | {worst['paper']:.1f}% |",
+             f"| counter (pooled) | Ts, Ti, Tsetup | {mean['counter']:.1f}% | {worst['counter']:.1f}% |",
+             f"| memory-aware (pooled) | Ts0, Ti, kappa, Tsetup + host probe | {mean['memory-aware']:.1f}% | "
+             f"{worst['memory-aware']:.1f}% |",
+             f"| per-scene (own sweep) | Ts, Ti, Tsetup per scene | {mean['per-scene']:.1f}% | {worst['per-scene']:.1f}% |",
+             "", "AIC of the in-sample fits over all sweeps (lower is better; relative residuals): "
+             + ", ".join(f"{k} {v:.0f}" for k, v in aics.items()) + ".", "",
+             f"## Model chosen per scene (simplest within {TOLERANCE_PP:g} percentage point of the best held-out MAPE)", "",
+             "| scene | N | largest swept grid | paper | counter | memory-aware | per-scene | chosen | why |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for _, r in chosen.iterrows():
+        lines.append(f"| {r.scene} | {r.N:,} | {r.largest_grid_MiB:.1f} MiB | {r.mape_paper:.1f}% | {r.mape_counter:.1f}% | "
+                     f"{r['mape_memory-aware']:.1f}% | {r['mape_per-scene']:.1f}% | {r.chosen} | {r.why} |")
+    l2 = mach.caches_.get("L2", 0) / 2**20
+    big = chosen[chosen.largest_grid_MiB > l2]
+    mem = chosen[chosen.chosen == "memory-aware"]
+    lines += ["", "## Reading", "",
+              f"The memory term is chosen for {len(mem)} of {len(chosen)} scenes"
+              + (f" ({', '.join(mem.scene)})" if len(mem) else "")
+              + f"; {len(big)} scenes have swept grids larger than L2 ({l2:.0f} MiB). "
+              f"Mean held-out MAPE with one calibration point: paper {mean['paper']:.1f} %, counter "
+              f"{mean['counter']:.1f} %, memory-aware {mean['memory-aware']:.1f} % (goal ≤ 7 %).", "",
+              "Speed against accuracy (`paper_figs/speed_accuracy.png`, `speed_accuracy.csv`): each pooled model "
+              "calibrated on 1, 3 or all other scenes with 3 or all sweep points each (mean of random draws), and "
+              "the per-scene fit at the cost of a whole sweep; x = machine seconds of the calibration measurements, "
+              "y = held-out MAPE (left) and penalty of the chosen M (right); the Pareto front is circled."]
+    front = sa[sa.pareto_mape].sort_values("calibration_s")
+    lines += ["", "Pareto front (MAPE): " + "; ".join(
+        f"{r.model} ({r.n_train} scenes, {r.points} points): {r.calibration_s:.1f} s, {r.mape_pct:.1f} %"
+        for _, r in front.iterrows()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def _figure(ctx, sa):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(4, 3))
-    for pts, g in cost.groupby(cost.points.astype(str)):
-        m = g.groupby("n_train").mape_pct.mean()
-        ax.plot(m.index, m.values, "o-", ms=3, label=f"{pts} points/scene")
-    ax.set_xlabel("calibration scenes")
-    ax.set_ylabel("held-out MAPE (%)")
-    ax.legend(fontsize=7)
-    ctx.finish_figure(fig, "predict")
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2))
+    for ax, col, label in ((axes[0], "mape_pct", "held-out runtime MAPE (%)"),
+                           (axes[1], "penalty_pct", "penalty of the chosen M (%)")):
+        for model, g in sa.groupby("model", sort=False):
+            ax.plot(g.calibration_s, g[col], "o", ms=4, label=model)
+        p = sa[sa[f"pareto_{col.split('_')[0]}"]].sort_values("calibration_s")
+        ax.plot(p.calibration_s, p[col], "k--", lw=0.8)
+        ax.plot(p.calibration_s, p[col], "o", ms=9, mfc="none", mec="k", label="Pareto front")
+        ax.set_xscale("log")
+        ax.set_xlabel("calibration (machine seconds)")
+        ax.set_ylabel(label)
+    axes[0].legend(fontsize=7)
+    ctx.finish_figure(fig, "speed_accuracy")
