@@ -178,24 +178,26 @@ def aic(T, pred, k: int) -> float:
     return float(n * np.log(max((r**2).sum() / n, 1e-300)) + 2 * k)
 
 
-def interpolate_counters(frame, cells_new) -> dict:
-    """The counters of a scene's swept grids, interpolated in log M - log counter to ``cells_new``
-    (counting is cheap and smooth in M; used to place a model's optimum between swept points)."""
-    g = frame.sort_values("cells").drop_duplicates("cells")
-    lx = np.log(g["cells"].to_numpy(float))
-    out = {"cells": np.asarray(cells_new, float)}
-    for col in ("steps", "tests", "occupied", "memory_bytes"):
-        v = np.maximum(g[col].to_numpy(float), 1e-9)
-        out[col] = np.exp(np.interp(np.log(out["cells"]), lx, np.log(v)))
-    out["scene"] = np.full(len(out["cells"]), str(g["scene"].iloc[0]))
+def interpolate_counters(frame, x_new, x: str = "cells") -> dict:
+    """The counters of a scene's swept grids, interpolated in log x - log counter to ``x_new`` (``x``:
+    the swept parameter, "cells" for one-level grids, "param_m1" for nested ones). Counting is cheap
+    and smooth in M; this places a model's optimum between swept points."""
+    g = frame.sort_values(x).drop_duplicates(x)
+    lx = np.log(g[x].to_numpy(float))
+    out = {x: np.asarray(x_new, float)}
+    for col in ("steps", "tests", "occupied", "memory_bytes", "cells"):
+        if col != x:
+            v = np.maximum(g[col].to_numpy(float), 1e-9)
+            out[col] = np.exp(np.interp(np.log(out[x]), lx, np.log(v)))
+    out["scene"] = np.full(len(out[x]), str(g["scene"].iloc[0]))
     return out
 
 
-def model_optimum(fit, frame, points: int = 200) -> float:
-    """The M minimising ``fit``'s prediction over the swept range of one scene's grids."""
-    lo, hi = float(frame["cells"].min()), float(frame["cells"].max())
+def model_optimum(fit, frame, x: str = "cells", points: int = 200) -> float:
+    """The ``x`` (M, or M1) minimising ``fit``'s prediction over the swept range of one scene's grids."""
+    lo, hi = float(frame[x].min()), float(frame[x].max())
     grid = np.geomspace(lo, hi, points)
-    pred = fit.work(interpolate_counters(frame, grid))
+    pred = fit.work(interpolate_counters(frame, grid, x))
     return float(grid[int(np.argmin(pred))])
 
 

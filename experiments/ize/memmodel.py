@@ -25,21 +25,23 @@ def machine(quick: bool = False, log=None):
     return _MACHINE[quick]
 
 
-def grid_rows(df: pd.DataFrame, kind: str) -> pd.DataFrame:
-    d = df[(df.ray_kind == kind) & (df.structure == "grid")]
-    return d.drop_duplicates(["scene", "cells"])
+def grid_rows(df: pd.DataFrame, kind: str, structure: str = "grid", x: str = "cells") -> pd.DataFrame:
+    d = df[(df.ray_kind == kind) & (df.structure == structure)]
+    return d.drop_duplicates(["scene", x])
 
 
-def memory_aware_cells(df: pd.DataFrame, scene: str, kind: str, mach) -> tuple[float, str]:
-    """(M, how): the memory-aware model's M for ``scene`` from the other scenes' sweeps of ``df``."""
-    d = grid_rows(df, kind)
+def memory_aware_cells(df: pd.DataFrame, scene: str, kind: str, mach, structure: str = "grid",
+                       x: str = "cells") -> tuple[float, str]:
+    """(M, how): the memory-aware model's M (``x`` = "cells"), or M1 of a nested grid (``structure`` =
+    "nested", ``x`` = "param_m1"), for ``scene`` from the other scenes' sweeps of ``df``."""
+    d = grid_rows(df, kind, structure, x)
     test = d[d.scene == scene]
     train = d[d.scene != scene]
     how = "held-out"
     if train.scene.nunique() == 0:
         train, how = test, "in-sample"
     fit = MemoryCostFit(mach).fit(train, train.anchored_ns_per_ray)
-    return model_optimum(fit, test), how
+    return model_optimum(fit, test, x), how
 
 
 def working_set_note(rows: pd.DataFrame, mach) -> str:
