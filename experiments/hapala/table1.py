@@ -301,6 +301,31 @@ def stadium_note(raw: list[dict], tab: pd.DataFrame, scene: str = "teapot-in-sta
             f"wins depends on where the rays go.")
 
 
+def hierarchy_comparison(tabs: dict) -> tuple[pd.DataFrame, str]:
+    """Hapala's outcome per hierarchy (kd-tree, BVH) beside the paper's (kd-tree): scenes where the
+    grid wins outright, median t_R^G / t_R^H and median T_B^H / T_B^G."""
+    rows = []
+    for h, t in tabs.items():
+        for k in KINDS:
+            rows.append({"hier": h, "kind": k, "scenes": len(t), "grid_wins": int(np.isinf(t[f"R_C_{k}"]).sum()),
+                         "median_tG_over_tH": float(np.median(t[f"t_RG_us_{k}"] / t[f"t_RH_us_{k}"])),
+                         "median_TBH_over_TBG": float(np.median(t.T_BH_ms / t.T_BG_ms))})
+    for k, (cg, ch) in (("random", (5, 6)), ("path", (8, 9))):
+        rows.append({"hier": "kd-tree (paper)", "kind": k, "scenes": len(PAPER),
+                     "grid_wins": sum(1 for p in PAPER if p[7 if k == "random" else 10] == 0),
+                     "median_tG_over_tH": float(np.median([p[cg] / p[ch] for p in PAPER])),
+                     "median_TBH_over_TBG": float(np.median([p[4] / p[3] for p in PAPER]))})
+    cmp_ = pd.DataFrame(rows)
+    lines = ["", "## Per hierarchy: the grid against the kd-tree and against the BVH", "",
+             "Same scenes, rays and grids; t_R per ray on one thread; the paper's row is its kd-tree (28 scenes).", "",
+             "| hierarchy | rays | scenes | grid wins outright | median t_R^G / t_R^H | median T_B^H / T_B^G |",
+             "|---|---|---|---|---|---|"]
+    for _, r in cmp_.iterrows():
+        lines.append(f"| {r.hier} | {r.kind} | {r.scenes} | {r.grid_wins} | {r.median_tG_over_tH:.2f} | "
+                     f"{r.median_TBH_over_TBG:.0f} |")
+    return cmp_, "\n".join(lines) + "\n"
+
+
 def summary(tab: pd.DataFrame, cfg: dict, threads: int, hier_note: str, notes=()) -> str:
     f2 = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{v:.2f}"  # noqa: E731
     f1 = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{v:,.1f}"  # noqa: E731
@@ -395,6 +420,9 @@ def run(ctx, args, log=print) -> dict:
     note = (f"With the BVH (tracer.bvh, binned SAH) as the hierarchy instead, the hierarchy pays off in "
             f"{nb['random']} (random) / {nb['path']} (path) of {len(bvh)} scenes (calibration.csv, hier = bvh).")
     md = summary(tab, cfg, threads, note, notes=[stadium_note(raw, tab)])
+    cmp_, cmp_md = hierarchy_comparison({"kd-tree": tab, "BVH": bvh})
+    ctx.write_csv(out_dir / "hierarchies.csv", cmp_)
+    md += cmp_md
     if getattr(args, "retest", False):
         raw2 = measure_all(ctx, names, cfg, log=log, repeat_pass=2)
         write_json(out_dir / "raw_retest.json", raw2)
