@@ -185,7 +185,7 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
                     j -= 1
             if i > s and i < e:
                 mid = i
-        info[node, 1] = 0
+        info[node, 1] = -1 - (best_axis if best_axis >= 0 else 0)  # interior: -1 - split axis
         if sp == st_s.shape[0]:
             st_s = np.concatenate((st_s, st_s))
             st_e = np.concatenate((st_e, st_e))
@@ -297,7 +297,10 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
                     hr = rn <= rf + tol
                     if hl and hr:
                         spu = np.uintp(sp)
-                        near_left = ln <= rn
+                        if cnt == 0:  # order by entry distance
+                            near_left = ln <= rn
+                        else:  # order by the sign of the direction on the split axis -1 - cnt
+                            near_left = (sx if cnt == -1 else (sy if cnt == -2 else sz)) == 0
                         sn[spu] = right if near_left else left
                         st[spu] = rn if near_left else ln
                         sp += 1
@@ -341,8 +344,8 @@ class BVH(TreeTraceMixin, Accel):
 
     name = "bvh"
 
-    def __init__(self, bins=32, max_leaf=4, trav_cost=BVH_TRAV_COST):
-        self.bins, self.max_leaf, self.trav_cost = bins, max_leaf, trav_cost
+    def __init__(self, bins=32, max_leaf=4, trav_cost=BVH_TRAV_COST, order="sign"):
+        self.bins, self.max_leaf, self.trav_cost, self.order = bins, max_leaf, trav_cost, order
 
     def build(self, scene):
         n = scene.n
@@ -352,6 +355,8 @@ class BVH(TreeTraceMixin, Accel):
             raise GridcostError(f"BVH max_leaf must be >= 1, got {self.max_leaf}")
         if n >= 2**30:
             raise GridcostError(f"{n:,} triangles exceed the BVH's int32 index range")
+        if self.order not in ("sign", "distance"):
+            raise GridcostError(f"BVH order must be 'sign' or 'distance', got {self.order!r}")
         check_budget(f"a BVH over {n:,} triangles of {scene.name}", n * (2 * 32 + 24 + 24 + 40 + 8))
         t_start = time.perf_counter()
         tris = scene.tris
@@ -371,6 +376,8 @@ class BVH(TreeTraceMixin, Accel):
         nodes = np.empty((len(B), 8), np.int32)
         nodes[:, :6] = B.view(np.int32)
         nodes[:, 6:] = info
+        if self.order == "distance":  # interior b = 0: the kernel orders children by entry distance
+            nodes[nodes[:, 7] < 0, 7] = 0
         self.nodes_ = nodes
         self.nodes_f_ = nodes.view(np.float32)
         self.tri_ids_ = order
@@ -397,5 +404,6 @@ class BVH(TreeTraceMixin, Accel):
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes
                                 + self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
-            "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost},
+            "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost,
+                       "order": self.order},
         }
