@@ -344,7 +344,7 @@ class BVH(TreeTraceMixin, Accel):
 
     name = "bvh"
 
-    def __init__(self, bins=32, max_leaf=4, trav_cost=BVH_TRAV_COST, order="sign"):
+    def __init__(self, bins=32, max_leaf=4, trav_cost=BVH_TRAV_COST, order="distance"):
         self.bins, self.max_leaf, self.trav_cost, self.order = bins, max_leaf, trav_cost, order
 
     def build(self, scene):

@@ -134,6 +134,24 @@ def collapse4(nb, info):
 
 
 # ---------------------------------------------------------------- traversal
+#: set bits and lowest set bit of a 4-bit hit mask
+_NBITS = (0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4)
+_LOWBIT = (0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0)
+
+
+@jit(inline="always")
+def _gt(t, a):
+    """``a`` if ``a > t`` else ``t`` (one maxss): a NaN plane distance (0 * inf: origin on the plane,
+    zero direction) is ignored, i.e. the slab is no constraint."""
+    return a if a > t else t
+
+
+@jit(inline="always")
+def _lt(t, a):
+    """``a`` if ``a < t`` else ``t``; a NaN is ignored."""
+    return a if a < t else t
+
+
 @jit
 def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size,
                out_t, out_id, counters):
@@ -142,6 +160,8 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
     sn = np.empty(stack_size, np.int64)
     sc = np.empty(stack_size, np.int64)
     st = np.empty(stack_size, np.float64)
+    t4 = np.empty(4, np.float32)
+    tmin32 = np.float32(tmin)
     for i in range(lo, hi):
         px = np.float64(O[i, 0])
         py = np.float64(O[i, 1])
@@ -160,29 +180,30 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
         sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
         sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
         sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
-        # word offsets of the near / far planes of the four boxes on each axis
-        nxo = np.uintp(4) * sx
-        fxo = np.uintp(12) - nxo
-        nyo = np.uintp(4) + np.uintp(4) * sy
-        fyo = np.uintp(16) - np.uintp(4) * sy
-        nzo = np.uintp(8) + np.uintp(4) * sz
-        fzo = np.uintp(20) - np.uintp(4) * sz
         t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, best)
         in_box = t0 <= t1
         if in_box:
             tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
-            sn[0] = 0
-            sc[0] = 0
-            st[0] = t0
-            sp = 1
-            while sp > 0:
-                sp -= 1
-                spu = np.uintp(sp)
-                if st[spu] > best + tol:
-                    continue
+            # float32 copies of the ray for the box tests (see the module docstring)
+            ox = O[i, 0]
+            oy = O[i, 1]
+            oz = O[i, 2]
+            jx = np.float32(ix)
+            jy = np.float32(iy)
+            jz = np.float32(iz)
+            tol32 = np.float32(tol)
+            # word offsets of the near / far planes of the four boxes on each axis
+            nxo = np.uintp(4) * sx
+            fxo = np.uintp(12) - nxo
+            nyo = np.uintp(4) + np.uintp(4) * sy
+            fyo = np.uintp(16) - np.uintp(4) * sy
+            nzo = np.uintp(8) + np.uintp(4) * sz
+            fzo = np.uintp(20) - np.uintp(4) * sz
+            sp = 0
+            ref = 0
+            cnt = 0
+            while True:
                 nvis += 1
-                ref = sn[spu]
-                cnt = sc[spu]
                 if cnt > 0:
                     leaves += 1
                     done = False
@@ -200,47 +221,58 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
                                 break
                     if done:
                         break
-                    continue
-                base = np.uintp(WORDS) * np.uintp(ref)
-                lim = best + tol
-                sp0 = sp
-                for k in range(4):
-                    ku = base + np.uintp(k)
-                    tn = tmin
-                    tf = lim
-                    a = (np.float64(nf[ku + nxo]) - px) * ix
-                    if a > tn:
-                        tn = a
-                    a = (np.float64(nf[ku + fxo]) - px) * ix
-                    if a < tf:
-                        tf = a
-                    a = (np.float64(nf[ku + nyo]) - py) * iy
-                    if a > tn:
-                        tn = a
-                    a = (np.float64(nf[ku + fyo]) - py) * iy
-                    if a < tf:
-                        tf = a
-                    a = (np.float64(nf[ku + nzo]) - pz) * iz
-                    if a > tn:
-                        tn = a
-                    a = (np.float64(nf[ku + fzo]) - pz) * iz
-                    if a < tf:
-                        tf = a
-                    c = ni[ku + np.uintp(CNT)]
-                    if tn <= tf + tol and c >= 0:
-                        # insert into the run pushed at this node, kept sorted far .. near
-                        j = sp
-                        while j > sp0 and st[np.uintp(j - 1)] < tn:
+                    ref = -1
+                else:
+                    base = np.uintp(WORDS) * np.uintp(ref)
+                    lim = np.float32(best + tol)
+                    mask = 0
+                    for k in range(4):  # the four slab tests, branch-free
+                        ku = base + np.uintp(k)
+                        tn = _gt(_gt(_gt(tmin32, (nf[ku + nxo] - ox) * jx), (nf[ku + nyo] - oy) * jy),
+                                 (nf[ku + nzo] - oz) * jz)
+                        tf = _lt(_lt(_lt(lim, (nf[ku + fxo] - ox) * jx), (nf[ku + fyo] - oy) * jy),
+                                 (nf[ku + fzo] - oz) * jz)
+                        t4[k] = tn
+                        mask |= np.int64(tn <= tf + tol32) << k
+                    if mask == 0:
+                        ref = -1
+                    elif _NBITS[mask] == 1:  # one child hit: visit it, no stack
+                        ku = base + np.uintp(_LOWBIT[mask])
+                        ref = ni[ku + np.uintp(REF)]
+                        cnt = ni[ku + np.uintp(CNT)]
+                    else:  # push the hit children, kept sorted far .. near, and visit the nearest
+                        sp0 = sp
+                        while mask != 0:
+                            k = _LOWBIT[mask]
+                            mask &= mask - 1
+                            ku = base + np.uintp(k)
+                            tn = np.float64(t4[k])
+                            j = sp
+                            while j > sp0 and st[np.uintp(j - 1)] < tn:
+                                ju = np.uintp(j)
+                                st[ju] = st[ju - np.uintp(1)]
+                                sn[ju] = sn[ju - np.uintp(1)]
+                                sc[ju] = sc[ju - np.uintp(1)]
+                                j -= 1
                             ju = np.uintp(j)
-                            st[ju] = st[ju - np.uintp(1)]
-                            sn[ju] = sn[ju - np.uintp(1)]
-                            sc[ju] = sc[ju - np.uintp(1)]
-                            j -= 1
-                        ju = np.uintp(j)
-                        st[ju] = tn
-                        sn[ju] = ni[ku + np.uintp(REF)]
-                        sc[ju] = c
-                        sp += 1
+                            st[ju] = tn
+                            sn[ju] = ni[ku + np.uintp(REF)]
+                            sc[ju] = ni[ku + np.uintp(CNT)]
+                            sp += 1
+                        sp -= 1
+                        spu = np.uintp(sp)
+                        ref = sn[spu]
+                        cnt = sc[spu]
+                if ref < 0:  # pop the nearest pending entry that may still hold a closer hit
+                    while sp > 0:
+                        sp -= 1
+                        spu = np.uintp(sp)
+                        if st[spu] <= best + tol:
+                            ref = sn[spu]
+                            cnt = sc[spu]
+                            break
+                    if ref < 0:
+                        break
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 
