@@ -8,14 +8,17 @@ each of the three axes; the split between bins with the least SAH cost
 best split (cost N); larger nodes are always split (by index halves when all centroids coincide).
 
 Layout (depth-first, left child implicit at ``i + 1``): ``nodes_`` (nodes, 8) int32 records of
-32 bytes, ``[lo xyz, hi xyz (float32 bits), a, b]`` — interior ``a`` = right child, ``b`` = 0;
+32 bytes, ``[lo xyz, hi xyz (float32 bits), a, b]`` — interior ``a`` = right child, ``b`` <= 0 (below);
 leaf ``a`` = offset, ``b`` = count >= 1 — and ``nodes_f_`` their float32 view. ``tri_ids_`` and
 ``tri_verts_`` (N, 9) float32 hold the triangles in leaf order.
 
 Traversal: at an interior node both child boxes are tested (float64 slab test that treats an
 origin on a slab plane with a zero direction as inside); the nearer hit child is visited first
 and the other pushed with its entry distance on a fixed-size stack (one per chunk of rays), and
-popped entries beyond the closest hit are dropped. Box/hit comparisons are widened by ``tol``
+popped entries beyond the closest hit are dropped. With ``order="sign"`` the near child is picked
+instead by the sign of the ray direction on the node's split axis (left = lower centroids first);
+interior ``b`` then holds ``-1 - axis`` (``b`` = 0: by entry distance, the default; sign ordering
+measured no faster on random rays). Box/hit comparisons are widened by ``tol``
 (T_EPS = 2e-6 of the ray's t scale) so rounding never loses a hit, also not the hits
 :func:`tracer.geometry.ray_triangle` accepts on a triangle's very edge. The ray is widened to
 float64 with ``np.float64`` and passed to ray_triangle exactly as the grid and the oracle pass it
@@ -338,7 +341,8 @@ def bvh_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size, 
 
 class BVH(TreeTraceMixin, Accel):
     """Binned-SAH BVH. Parameters: ``bins`` (32), ``max_leaf`` triangles per leaf (4),
-    ``trav_cost`` relative to one triangle test (pbrt-v2: 1/8)."""
+    ``trav_cost`` relative to one triangle test (pbrt-v2: 1/8), ``order`` of the two children
+    ("distance": nearer entry first; "sign": by the direction's sign on the split axis)."""
 
     _kernel = staticmethod(bvh_trace)
 

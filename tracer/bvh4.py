@@ -13,13 +13,18 @@ then ``ref[4]`` and ``count[4]``: count 0 = interior child (ref = its node), cou
 offset into ``tri_verts_``/``tri_ids_``), count -1 = empty slot (box lo = +inf, hi = -inf, never hit).
 ``nodes_f_`` is the float32 view.
 
-Traversal: the same rules as :mod:`tracer.bvh` (float64 slab test on the float32 boxes, NaN
-products of an origin on a slab plane with a zero direction ignored, comparisons widened by
+Traversal: the rules of :mod:`tracer.bvh` (the root box tested in float64, comparisons widened by
 ``tol`` = T_EPS of the ray's t scale, float32 vertices passed to :func:`tracer.geometry.ray_triangle`
-as the oracle passes them), so a hit's t and triangle are bit-identical to the oracle's. At a node
-the four boxes are tested, the hit children pushed on one stack with their entry distances and the
-pushed run sorted so the nearest is on top; an entry whose distance lies beyond the closest hit
-(+ tol) is dropped when popped. Counters: ``setups`` 1 per ray meeting the root box, ``nodes``
+as the oracle passes them, so a hit's t and triangle are bit-identical to the oracle's), except that
+the four child boxes of a node are tested in float32: origin (float32 already), inverse direction
+rounded to float32, ``(plane - o) * inv`` per plane, NaN products (origin on a slab plane, zero
+direction) ignored. Each float32 distance that decides a hit (the entry max and exit min, both
+within [tmin, the root exit] for a ray meeting the box) is within about 3 float32 roundings (2e-7
+relative) of the exact value, an order of magnitude inside ``tol`` (2e-6 of the t scale), so the
+widened test never drops a box the ray meets (a box met only within the widening is just visited).
+The four hits form a 4-bit mask: one hit child is visited directly; several are pushed on one stack
+with their entry distances, sorted so the nearest is on top, and it is visited; an entry whose
+distance lies beyond the closest hit (+ tol) is dropped when popped. Counters: ``setups`` 1 per ray meeting the root box, ``nodes``
 entries visited (4-wide nodes and leaves), ``steps`` leaves visited, ``tests`` triangle tests.
 """
 from __future__ import annotations
