@@ -29,6 +29,7 @@ STRUCTURES = {
     "nested": "tracer.nested:NestedGrid",
     "kdtree": "tracer.kdtree:KdTree",
     "bvh": "tracer.bvh:BVH",
+    "bvh4": "tracer.bvh4:BVH4",
     "cgt": "tracer.packet:CoherentGrid",
     "sortedlists": "tracer.sortedlists:SortedLists",
 }

@@ -32,6 +32,8 @@ VARIANTS = {
     "nested": ("nested", {}),
     "kdtree": ("kdtree", {}),
     "bvh": ("bvh", {}),
+    "bvh-sign": ("bvh", {"order": "sign"}),
+    "bvh4": ("bvh4", {}),
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
