@@ -196,6 +196,19 @@ def pareto(x, y) -> np.ndarray:
     return np.array([not np.any((x <= x[i]) & (y <= y[i]) & ((x < x[i]) | (y < y[i]))) for i in range(len(x))])
 
 
+def selector_points(out) -> pd.DataFrame:
+    """The selector's speed against accuracy from fig1h (Hapala's estimator and ours; x = calibration
+    seconds, y = wrong picks in %), empty when fig1h has not run in this results folder."""
+    path = Path(out) / "fig1h" / "speed_accuracy.csv"
+    if not path.exists():
+        return pd.DataFrame()
+    s = pd.read_csv(path)
+    s = s[s.axis == "calibration scenes"]
+    return pd.DataFrame({"model": "selector: " + s.estimator + " estimator", "n_train": s.C, "points": s.sample_rays,
+                         "calibration_s": s.cost_s, "wrong_picks_pct": 100 * (1 - s.correct),
+                         "median_abs_err_pct": s.median_abs_err, "source_commit": s.commit})
+
+
 def main(ctx, args) -> int:
     started = time.time()
     df = load_sweeps(ctx, args)
@@ -212,14 +225,17 @@ def main(ctx, args) -> int:
     sa = speed_accuracy(df, scenes, mach, args.reps or (3 if ctx.quick else 10), args.seed)
     for col in ("mape_pct", "penalty_pct"):
         sa[f"pareto_{col.split('_')[0]}"] = pareto(sa.calibration_s, sa[col])
+    sel = selector_points(args.out)
+    if len(sel):
+        sel["pareto_wrong"] = pareto(sel.calibration_s, sel.wrong_picks_pct)
     aics = dataset_aic(df, mach)
     out_dir = Path(args.out) / "predict"
     ctx.write_csv(out_dir / "loo.csv", loo)
     ctx.write_csv(out_dir / "model_choice.csv", chosen)
-    ctx.write_csv(out_dir / "speed_accuracy.csv", sa)
-    md = _summary(loo, chosen, sa, aics, mach, df)
+    ctx.write_csv(out_dir / "speed_accuracy.csv", pd.concat([sa, sel], ignore_index=True))
+    md = _summary(loo, chosen, sa, aics, mach, df, sel)
     atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, sa)
+    _figure(ctx, sa, sel)
     ctx.write_meta(out_dir, "predict", started, scenes=scenes, seed=args.seed, sources=sorted(df.source.unique()),
                    machine=mach.data, aic=aics)
     if args.json:
@@ -231,7 +247,7 @@ def main(ctx, args) -> int:
     return 0
 
 
-def _summary(loo, chosen, sa, aics, mach, df) -> str:
+def _summary(loo, chosen, sa, aics, mach, df, sel) -> str:
     mean = loo.groupby("model", sort=False).mape_pct.mean()
     worst = loo.groupby("model", sort=False).penalty_pct.max()
     lines = ["# Cross-scene prediction: four cost models, held out scene by scene", "",
@@ -272,14 +288,34 @@ def _summary(loo, chosen, sa, aics, mach, df) -> str:
     lines += ["", "Pareto front (MAPE): " + "; ".join(
         f"{r.model} ({r.n_train} scenes, {r.points} points): {r.calibration_s:.1f} s, {r.mape_pct:.1f} %"
         for _, r in front.iterrows()) + "."]
+    if len(sel):
+        f = sel[sel.pareto_wrong].sort_values("calibration_s")
+        lines += ["", "Selector (right panel; from `fig1h`'s random splits, Hapala's estimator and ours, 1,000 sampled "
+                  "rays per decision): y = wrong grid/kd-tree picks over ray budgets 10^3..10^9 (%). Pareto front: "
+                  f"{len(f)} points, " + "; ".join(
+                      f"{est}: {len(g)} points, {g.calibration_s.min():.0f}–{g.calibration_s.max():.0f} s, "
+                      f"{g.wrong_picks_pct.max():.1f} → {g.wrong_picks_pct.min():.1f} % wrong"
+                      for est, g in f.groupby("model", sort=False)) + "."]
+    else:
+        lines += ["", "Selector panel: empty (no `fig1h` results in this folder)."]
     return "\n".join(lines) + "\n"
 
 
-def _figure(ctx, sa):
+def _figure(ctx, sa, sel):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2))
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
+    ax = axes[2]
+    for model, g in (sel.groupby("model", sort=False) if len(sel) else []):
+        ax.plot(g.calibration_s, g.wrong_picks_pct, "o-", ms=3, lw=0.8, label=model)
+    if len(sel):
+        p = sel[sel.pareto_wrong].sort_values("calibration_s")
+        ax.plot(p.calibration_s, p.wrong_picks_pct, "o", ms=9, mfc="none", mec="k", label="Pareto front")
+        ax.legend(fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("calibration (machine seconds)")
+    ax.set_ylabel("selector: wrong picks (%)")
     for ax, col, label in ((axes[0], "mape_pct", "held-out runtime MAPE (%)"),
                            (axes[1], "penalty_pct", "penalty of the chosen M (%)")):
         for model, g in sa.groupby("model", sort=False):
