@@ -76,3 +76,12 @@ def test_occupied_counter(structure, params):
     assert (occ <= steps).all() and (occ <= tests).all()
     assert ((occ > 0) == (tests > 0)).all()
     assert occ.sum() > 0 and (occ < steps).any()
+
+
+@pytest.mark.parametrize("structure", ["grid", "nested", "bvh", "bvh4"])
+def test_working_set_by_kind_adds_up(structure):
+    st = build(load_scene("bunny-948"), structure).stats()
+    ws = st["working_set"]
+    assert ws["total"] == ws["index"] + ws["refs"] + ws["triangles"] > 0
+    assert ws["triangles"] >= 948 * 36  # every triangle's 9 float32 at least once
+    assert ws["total"] == st["memory_bytes"]

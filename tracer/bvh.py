@@ -38,7 +38,7 @@ from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.kdtree import root_box
-from tracer.memory import check_budget
+from tracer.memory import check_budget, working_set
 
 #: relative widening of box/hit comparisons (of the ray's t scale), as in tracer.kdtree
 T_EPS = 2e-6
@@ -407,6 +407,7 @@ class BVH(TreeTraceMixin, Accel):
             "sah_cost": self.trav_cost * e["exp_inner"] + e["exp_tests"],
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes
                                 + self.tri_verts_.nbytes),
+            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes, self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost,
                        "order": self.order},

@@ -39,6 +39,7 @@ from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import Accel
 from tracer.bvh import BVH, BVH_TRAV_COST, T_EPS, _box
 from tracer.geometry import INF, ray_triangle
+from tracer.memory import working_set
 
 #: int32 words per 4-wide node: 24 box words (SoA float32), 4 refs, 4 counts
 WORDS = 32
@@ -345,6 +346,7 @@ class BVH4(Accel):
             "mean_children": float((cnt >= 0).sum() / max(nn, 1)),
             "mean_leaf_refs": bs["mean_leaf_refs"],
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
+            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes, self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"bins": self.bins, "max_leaf": self.max_leaf, "trav_cost": self.trav_cost},
         }

@@ -20,7 +20,7 @@ from tracer.accel import COUNTER_NAMES, Accel
 from tracer.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle, tri_box_overlap
-from tracer.memory import cache_bytes, check_budget
+from tracer.memory import cache_bytes, check_budget, working_set
 
 #: direct-mapped mailbox entries per thread (power of two)
 MAILBOX = 32
@@ -398,6 +398,8 @@ class UniformGrid(Accel):
             "structure": "grid", "res": [int(r) for r in self.res_], "cells": ncell,
             "refs": int(self.refs_), "refs_per_tri": self.refs_ / max(self.n_, 1),
             "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
+            "working_set": working_set(self.cell_start_.nbytes + self.occ_.nbytes, self.tri_ids_.nbytes,
+                                       self.tri_verts_.nbytes),
             "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
                                 + self.occ_.nbytes),
             "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,

@@ -80,3 +80,12 @@ def check_budget(what: str, estimate: int, budget: int | None = None) -> None:
         raise GridcostError(
             f"{what} would need about {fmt_bytes(estimate)}, over the memory budget of {fmt_bytes(budget)} "
             f"(set GRIDCOST_MEMORY_BUDGET to raise it, or use fewer cells)")
+
+
+def working_set(index, refs, triangles) -> dict:
+    """The bytes a structure's rays read, by kind: ``index`` (cell array or tree nodes), ``refs``
+    (reference lists / primitive ids) and ``triangles`` (vertex data), and their total — the
+    working set the memory-aware cost model (:mod:`costmodel.memory`) prices against the caches."""
+    ws = {"index": int(index), "refs": int(refs), "triangles": int(triangles)}
+    ws["total"] = sum(ws.values())
+    return ws

@@ -36,7 +36,7 @@ from tracer.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
 from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle
 from tracer.grid import grid_assign, grid_params, res_from_cells, starts_shifted
-from tracer.memory import check_budget
+from tracer.memory import check_budget, working_set
 
 NCOUNT = len(COUNTER_NAMES)
 #: per-level counter columns of :meth:`NestedGrid.intersect_levels`
@@ -438,7 +438,9 @@ class NestedGrid(Accel):
             "res": [int(r) for r in self.res1_], "grids": int(len(self.grid_f_)),
             "cells": ncell, "cells_per_tri": ncell / max(self.n_, 1),
             "refs": int(len(self.tri_ids_)), "refs_per_tri": len(self.tri_ids_) / max(self.n_, 1),
-            "per_level": self.level_stats_, "memory_bytes": mem, "build_s": self.build_seconds_,
+            "per_level": self.level_stats_, "memory_bytes": mem,
+            "working_set": working_set(self.grid_f_.nbytes + self.grid_i_.nbytes + self.cells_.nbytes,
+                                       self.tri_ids_.nbytes, self.tri_verts_.nbytes), "build_s": self.build_seconds_,
             "exact": self.exact, "leaf_threshold": self.leaf_threshold,
             "m2_factor": self.m2_factor, "m1_scale": self.m1_scale, "m2_scale": self.m2_scale,
             "depth_rule": self.depth_rule,
