@@ -52,7 +52,7 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def _calibration(ctx, log) -> dict:
+def calibration(ctx, log) -> dict:
     """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}."""
     from costmodel.select import GridcostEstimator, loo_errors, records
     from experiments.hapala.table1 import measure_all
@@ -92,7 +92,9 @@ def _probe(scene, structure: str, params: dict, rays, seed: int) -> dict:
     return {"build_s": t_build, "ray_s": tm.median / len(o), "rel": (-half, half), "stats": acc.stats()}
 
 
-def _candidates(scene, kind, R, cal, seed, log) -> list[dict]:
+def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
+    """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
+    (independent of R: :func:`with_totals` adds the totals)."""
     from costmodel.select import Selector
     from tracer.rays import make_rays
     rays = make_rays(scene, kind, PROBE_RAYS, seed=seed)
@@ -114,27 +116,56 @@ def _candidates(scene, kind, R, cal, seed, log) -> list[dict]:
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
-    for c in out:
+    return out
+
+
+def with_totals(cands: list[dict], R: float) -> list[dict]:
+    """Copies of ``cands`` with the predicted total for R rays (build + R x per ray) and its
+    interval (each part's relative interval applied to it), fastest first."""
+    out = []
+    for c in cands:
+        c = dict(c)
         c["predicted_s"] = c["build_s"] + R * c["ray_s"]
         c["predicted_lo"] = c["build_s"] * (1 + c["rel_build"][0]) + R * c["ray_s"] * (1 + c["rel_ray"][0])
         c["predicted_hi"] = c["build_s"] * (1 + c["rel_build"][1]) + R * c["ray_s"] * (1 + c["rel_ray"][1])
+        out.append(c)
     return sorted(out, key=lambda c: c["predicted_s"])
+
+
+def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0) -> dict:
+    """The measured truth of ``structures`` [(structure, params), …] on ``n_rays`` fresh rays of
+    ``kind`` (seed + 1: other rays than the probes'): build seconds = median of ``repeats`` builds
+    after a warm-up (wall clock), per-ray seconds = median over ``repeats`` interleaved rounds of
+    tracing all the rays with every structure (:func:`tracer.timing.time_paired`, default clock), so
+    a busy phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s}."""
+    import numpy as np
+    from tracer.accel import build
+    from tracer.rays import make_rays
+    from tracer.timing import build_clock, time_paired
+    rays = make_rays(scene, kind, int(n_rays), seed=seed + 1)
+    o, d = rays.origins, rays.directions
+    accs, builds = {}, {}
+    for structure, params in structures:
+        accs[structure] = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
+        ts = []
+        for _ in range(max(1, repeats)):
+            t0 = build_clock()
+            build(scene, structure, **params)
+            ts.append(build_clock() - t0)
+        builds[structure] = float(np.median(ts))
+    tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
+                     rounds=max(1, repeats), repeats=1)
+    return {k: {"build_s": builds[k], "ray_s": float(np.median(tm[k])) / rays.n, "rays": rays.n} for k in accs}
 
 
 def _check(scene, kind, R, cands, seed) -> None:
     """Build and time the three best candidates: measured_s = build + R x per-ray time."""
-    from tracer.accel import build
-    from tracer.rays import make_rays
-    from tracer.timing import build_clock, time_call
-    rays = make_rays(scene, kind, int(min(max(R, 1000), CHECK_RAYS)), seed=seed + 1)
+    n = int(min(max(R, 1000), CHECK_RAYS))
+    truth = measure(scene, kind, [(c["structure"], c["params"]) for c in cands[:3]], n, seed=seed)
     for c in cands[:3]:
-        build(scene, c["structure"], **c["params"])
-        t0 = build_clock()
-        acc = build(scene, c["structure"], **c["params"])
-        tb = build_clock() - t0
-        tm = time_call(lambda: acc.intersect(rays.origins, rays.directions, counters=False), repeats=5)
-        c["measured_s"] = tb + R * tm.median / rays.n
-        c["measured_build_s"], c["measured_ray_s"] = tb, tm.median / rays.n
+        m = truth[c["structure"]]
+        c["measured_s"] = m["build_s"] + R * m["ray_s"]
+        c["measured_build_s"], c["measured_ray_s"] = m["build_s"], m["ray_s"]
 
 
 def main(ctx, args) -> int:
@@ -146,8 +177,8 @@ def main(ctx, args) -> int:
     log = (lambda *a: None) if args.json else print
     set_threads(args.threads or 1)
     scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
-    cal = _calibration(ctx, log)
-    cands = _candidates(scene, args.kind, args.rays, cal, args.seed, log)
+    cal = calibration(ctx, log)
+    cands = with_totals(predict(scene, args.kind, cal, args.seed, log), args.rays)
     if args.check:
         _check(scene, args.kind, args.rays, cands, args.seed)
     pick = cands[0]
