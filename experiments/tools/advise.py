@@ -6,14 +6,18 @@ For each candidate — the uniform grid at Ize's M = 8N, the two-level grid at M
 the kd-tree and the BVH (and coherent grid packets for camera rays) — it predicts the total time for
 R rays, build plus trace, with an interval, and picks the fastest:
 
-* **Grids** are probed, as Hapala 2011's decision algorithm does: built (timed, wall clock) and a
-  sample of 20,000 of the rays traced (median of 5 after a warm-up: the steady state of a long
-  run); the interval is the spread of the repeats, at least ±10 %.
-* **Hierarchies** are predicted without building them, from a calibration on this host: table1h's
-  measurements of a few small built-in scenes (stored like every point, so the first call measures
-  and later calls reuse it) fit the estimator of :class:`costmodel.select.GridcostEstimator`
-  (build time and per-ray time from N and the probed grid's counters); the interval is the 10-90 %
-  range of its leave-one-scene-out relative errors.
+* **Grids** are probed, as Hapala 2011's decision algorithm does: built (wall clock, the median of
+  3 builds when cheap) and a sample of 20,000 rays traced (median of 5 after a warm-up: the steady
+  state of a long run; camera rays are whole 8x8 packets spread over a 200,000-pixel frame, the
+  frame a long run traces); the interval is the spread of the repeats, at least ±10 %.
+* **Hierarchies** (kd-tree, BVH) are probed the same way when cheap: when the calibration's estimate
+  of their build is at most 2 s. Above that they are predicted without building them, from a
+  calibration on this host: table1h's measurements of a few small built-in scenes (stored like every
+  point, so the first call measures and later calls reuse it) fit the estimator of
+  :class:`costmodel.select.GridcostEstimator` (build time and per-ray time from N and the probed
+  grid's counters); the interval is the 10-90 % range of its leave-one-scene-out relative errors.
+  (``advise-check`` found the estimator off by -60 to +80 % on meshes 12-50x larger than its
+  calibration scenes: extrapolated, it ranks close structures wrongly.)
 
 ``--check`` builds and times the three best candidates on R rays (at most 200,000 traced; the rest
 scaled) and prints measured beside predicted.
@@ -40,6 +44,12 @@ QUICK_CAL_CFG = dict(CAL_CFG, rays=1000, repeats=2, samples=[300, 1000])
 PROBE_RAYS, CHECK_RAYS = 20_000, 200_000
 #: relative half-width floor of a probed interval (single-pass timings of a shared machine)
 PROBE_FLOOR = 0.10
+#: a probe's build is timed 3 times (median) when one build takes less than this
+PROBE_REBUILD_S = 0.5
+#: a hierarchy whose estimated build takes at most this is built and probed like the grids
+PROBE_BUILD_MAX_S = 2.0
+#: rays per packet of the coherent grid (8x8 tiles of camera rays)
+PACKET = 64
 
 
 def add_arguments(p) -> None:
@@ -77,42 +87,70 @@ def calibration(ctx, log) -> dict:
     return out
 
 
-def _probe(scene, structure: str, params: dict, rays, seed: int) -> dict:
-    """Build (wall clock) and trace a sample of ``rays`` once: build seconds, per-ray seconds and the
-    relative spread of the sample's parts."""
+def probe_rays(scene, kind: str, seed: int):
+    """The probes' rays: PROBE_RAYS of ``kind``. Camera rays are whole 8x8 packets picked evenly from
+    a frame of CHECK_RAYS pixels (the frame --check and a long run trace), not a smaller frame: a
+    packet's coherence, and so a packet tracer's time per ray, depends on the frame's resolution."""
+    import numpy as np
+    from tracer.rays import Rays, make_rays
+    if kind != "camera":
+        return make_rays(scene, kind, PROBE_RAYS, seed=seed)
+    full = make_rays(scene, kind, CHECK_RAYS, seed=seed)
+    tiles = np.arange(full.n // PACKET)
+    pick = tiles[np.linspace(0, len(tiles) - 1, min(len(tiles), PROBE_RAYS // PACKET)).astype(int)]
+    idx = (pick[:, None] * PACKET + np.arange(PACKET)[None, :]).ravel()
+    return Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed)
+
+
+def _probe(scene, structure: str, params: dict, rays) -> dict:
+    """Build (wall clock; the median of 3 builds when one takes under PROBE_REBUILD_S) and trace the
+    probe ``rays`` (median of 5 after a warm-up): build seconds, per-ray seconds and their relative
+    intervals (half the spread of the repeats, at least PROBE_FLOOR)."""
+    import numpy as np
     from tracer.accel import build
     from tracer.timing import build_clock, time_call
-    build(scene, structure, **params)  # compile / warm outside the timing
     t0 = build_clock()
-    acc = build(scene, structure, **params)
-    t_build = build_clock() - t0
-    o, d = rays.origins[:PROBE_RAYS], rays.directions[:PROBE_RAYS]
+    build(scene, structure, **params)  # compile / warm outside the timing
+    first = build_clock() - t0
+    builds = []
+    for _ in range(3 if first < PROBE_REBUILD_S else 1):
+        t0 = build_clock()
+        acc = build(scene, structure, **params)
+        builds.append(build_clock() - t0)
+    o, d = rays.origins, rays.directions
     tm = time_call(lambda: acc.intersect(o, d, counters=False), repeats=5, min_sample=0.005)
+    tb = float(np.median(builds))
+    hb = max(PROBE_FLOOR, (max(builds) - min(builds)) / tb / 2)
     half = max(PROBE_FLOOR, tm.spread / 2)
-    return {"build_s": t_build, "ray_s": tm.median / len(o), "rel": (-half, half), "stats": acc.stats()}
+    return {"build_s": tb, "ray_s": tm.median / len(o), "rel_build": (-hb, hb), "rel_ray": (-half, half)}
+
+
+def _probed(structure, params, how, p) -> dict:
+    return {"structure": structure, "params": params, "how": how, **p}
 
 
 def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
     """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
-    (independent of R: :func:`with_totals` adds the totals)."""
+    (independent of R: :func:`with_totals` adds the totals). Grids are probed; a hierarchy is probed
+    too when the calibration's estimate of its build is at most PROBE_BUILD_MAX_S (cheap next to any
+    budget worth advice), and estimated from the calibration otherwise."""
     from costmodel.select import Selector
-    from tracer.rays import make_rays
-    rays = make_rays(scene, kind, PROBE_RAYS, seed=seed)
+    rays = probe_rays(scene, kind, seed)
     out = []
     for structure, params, label in (("grid", {"factor": 8.0}, "M = 8N (Ize Eq 4, Ti/Ts = 4)"),
                                      ("nested", {"levels": 2}, "M1 = (8N)^0.6, M2 = 8 N2 (Ize Eq 12-13)")):
-        p = _probe(scene, structure, params, rays, seed)
-        out.append({"structure": structure, "params": params, "how": f"probed ({label})", "build_s": p["build_s"],
-                    "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+        out.append(_probed(structure, params, f"probed ({label})", _probe(scene, structure, params, rays)))
     if kind == "camera":
-        p = _probe(scene, "cgt", {}, rays, seed)
-        out.append({"structure": "cgt", "params": {}, "how": "probed (Wald 2006, lambda = 5, 8x8 packets)",
-                    "build_s": p["build_s"], "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+        out.append(_probed("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)", _probe(scene, "cgt", {}, rays)))
     ckind = kind if kind in cal else "random"
     # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
     _, feats = Selector(kind=ckind, sample_rays=1000, seed=seed).probe(scene, rays if kind == ckind else None)
     for hier, (est, rel) in cal[ckind].items():
         T_BH, t_RH = est.predict(feats["N"], feats)
+        if T_BH <= PROBE_BUILD_MAX_S:
+            how = f"probed (built and traced: its estimated build, {T_BH * 1e3:.0f} ms, is cheap)"
+            out.append(_probed(hier, {}, how, _probe(scene, hier, {}, rays)))
+            continue
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
