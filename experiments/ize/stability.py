@@ -20,6 +20,7 @@ negative penalty: the two-level grid beats every one-level M).
 from __future__ import annotations
 
 import argparse
+import importlib
 import importlib.util
 import time
 from pathlib import Path
@@ -44,14 +45,13 @@ MEMORY_AWARE = "memory-aware (costmodel.memory)"
 
 
 def memory_rule():
-    """``costmodel.memory.memory_aware_cells`` when that module exists (the memory-aware cost model
-    being written; its signature: ``memory_aware_cells(scene, counters=<the scene's swept points: cells,
-    refs, memory_bytes, steps, tests, anchored_ns_per_ray>) -> M``), else None: the rule is then not
-    in the map yet."""
+    """``costmodel.memory.memory_aware_cells`` once that module provides it (the memory-aware cost
+    model being written; its signature: ``memory_aware_cells(scene, counters=<the scene's swept
+    points: cells, refs, memory_bytes, steps, tests, anchored_ns_per_ray>) -> M``), else None: the
+    rule is then not in the map yet."""
     if importlib.util.find_spec("costmodel.memory") is None:
         return None
-    from costmodel.memory import memory_aware_cells
-    return memory_aware_cells
+    return getattr(importlib.import_module("costmodel.memory"), "memory_aware_cells", None)
 
 
 def rule_cells(scene, ti_over_ts: float, counters: pd.DataFrame | None = None) -> dict:
