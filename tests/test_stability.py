@@ -63,7 +63,7 @@ def test_time_at_interpolates_in_log_log_and_never_extrapolates():
     assert np.isnan(stability.time_at(cells, t, 50.0)) and np.isnan(stability.time_at(cells, t, 2e4))
 
 
-def test_two_level_point_is_anchored_like_the_sweep(load, tmp_path):
+def test_two_level_point_is_paired_with_the_sweeps_reference(load, tmp_path):
     from experiments.core.context import RunContext
     from experiments.core.sweep import sweep
     from tracer.rays import make_rays
@@ -71,9 +71,9 @@ def test_two_level_point_is_anchored_like_the_sweep(load, tmp_path):
     store = RunContext(out=tmp_path, threads=1, quick=True).store()
     rays = {"random": make_rays(scene, "random", 2000, seed=3)}
     k = pd.DataFrame(sweep(scene, "grid", [{"cells": 8.0 * scene.n}], rays, store, 1))
-    ns, row = stability.two_level_ns(scene, k, store, 1)
+    pen, row = stability.two_level_penalty(scene, k, store, 1)
     assert row["structure"] == "nested" and row["rays"] == 2000 and row["seed"] == 3
-    assert ns > 0 and np.isclose(ns, row["ratio_to_ref"] * k.anchored_ns_per_ray.iloc[0] / k.ratio_to_ref.iloc[0])
+    assert np.isclose(pen, 100 * (row["ratio_to_ref"] / k.ratio_to_ref.iloc[0] - 1)) and pen > -100
 
 
 def test_where_fails_names_families_and_sizes():

@@ -109,7 +109,7 @@ def two_level_row(names, n_rays, seed) -> dict:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--families", default=None, help="comma-separated family prefixes (bunny,dragon,cylinder,particles)")
+    p.add_argument("--families", default=None, help="comma-separated family prefixes (bunny,dragon,cylinder,particles,CAD,teapot)")
     p.add_argument("--rays", type=int, default=None, help="random rays per point (default 100000 compact, 50000 skinny)")
     p.add_argument("--repeats", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
