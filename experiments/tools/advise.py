@@ -7,17 +7,19 @@ the kd-tree and the BVH (and coherent grid packets for camera rays) — it predi
 R rays, build plus trace, with an interval, and picks the fastest:
 
 * **Grids** are probed, as Hapala 2011's decision algorithm does: built (wall clock, the median of
-  3 builds when cheap) and a sample of 20,000 rays traced (median of 5 after a warm-up: the steady
-  state of a long run; camera rays are whole 8x8 packets spread over a 200,000-pixel frame, the
-  frame a long run traces); the interval is the spread of the repeats, at least ±10 %.
-* **Hierarchies** (kd-tree, BVH) are probed the same way when cheap: when the calibration's estimate
+  3 builds when cheap) and a sample of 20,000 rays traced (median of 5 interleaved rounds of every
+  probed candidate after a warm-up: the steady state of a long run, and a busy phase of a shared
+  machine cannot reorder them; camera rays are whole 8x8 packets spread over a 200,000-pixel frame,
+  the frame a long run traces); the interval is the spread of the repeats, at least ±10 %.
+* **Hierarchies** (kd-tree, BVH) are probed with them when cheap: when the calibration's estimate
   of their build is at most 2 s. Above that they are predicted without building them, from a
   calibration on this host: table1h's measurements of a few small built-in scenes (stored like every
   point, so the first call measures and later calls reuse it) fit the estimator of
   :class:`costmodel.select.GridcostEstimator` (build time and per-ray time from N and the probed
   grid's counters); the interval is the 10-90 % range of its leave-one-scene-out relative errors.
-  (``advise-check`` found the estimator off by -60 to +80 % on meshes 12-50x larger than its
-  calibration scenes: extrapolated, it ranks close structures wrongly.)
+  (``advise-check`` found the estimator off by -57 to +85 % in build and -70 to +129 % per ray on
+  meshes 1-50x larger than its calibration scenes, on a loaded machine: it ranks close structures
+  wrongly, so it is only the fallback for builds too dear to probe.)
 
 ``--check`` builds and times the three best candidates on R rays (at most 200,000 traced; the rest
 scaled) and prints measured beside predicted.
@@ -102,58 +104,37 @@ def probe_rays(scene, kind: str, seed: int):
     return Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed)
 
 
-def _probe(scene, structure: str, params: dict, rays) -> dict:
-    """Build (wall clock; the median of 3 builds when one takes under PROBE_REBUILD_S) and trace the
-    probe ``rays`` (median of 5 after a warm-up): build seconds, per-ray seconds and their relative
-    intervals (half the spread of the repeats, at least PROBE_FLOOR)."""
-    import numpy as np
-    from tracer.accel import build
-    from tracer.timing import build_clock, time_call
-    t0 = build_clock()
-    build(scene, structure, **params)  # compile / warm outside the timing
-    first = build_clock() - t0
-    builds = []
-    for _ in range(3 if first < PROBE_REBUILD_S else 1):
-        t0 = build_clock()
-        acc = build(scene, structure, **params)
-        builds.append(build_clock() - t0)
-    o, d = rays.origins, rays.directions
-    tm = time_call(lambda: acc.intersect(o, d, counters=False), repeats=5, min_sample=0.005)
-    tb = float(np.median(builds))
-    hb = max(PROBE_FLOOR, (max(builds) - min(builds)) / tb / 2)
-    half = max(PROBE_FLOOR, tm.spread / 2)
-    return {"build_s": tb, "ray_s": tm.median / len(o), "rel_build": (-hb, hb), "rel_ray": (-half, half)}
-
-
-def _probed(structure, params, how, p) -> dict:
-    return {"structure": structure, "params": params, "how": how, **p}
-
-
 def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
     """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
-    (independent of R: :func:`with_totals` adds the totals). Grids are probed; a hierarchy is probed
-    too when the calibration's estimate of its build is at most PROBE_BUILD_MAX_S (cheap next to any
-    budget worth advice), and estimated from the calibration otherwise."""
+    (independent of R: :func:`with_totals` adds the totals). The grids, and each hierarchy whose
+    build the calibration estimates at most PROBE_BUILD_MAX_S (cheap next to any budget worth
+    advice), are probed together (:func:`time_structures` on the probe rays: builds timed, traces
+    timed in interleaved rounds, so a busy phase of a shared machine hits all of them alike and
+    cannot reorder them); the other hierarchies are estimated from the calibration."""
     from costmodel.select import Selector
     rays = probe_rays(scene, kind, seed)
-    out = []
-    for structure, params, label in (("grid", {"factor": 8.0}, "M = 8N (Ize Eq 4, Ti/Ts = 4)"),
-                                     ("nested", {"levels": 2}, "M1 = (8N)^0.6, M2 = 8 N2 (Ize Eq 12-13)")):
-        out.append(_probed(structure, params, f"probed ({label})", _probe(scene, structure, params, rays)))
+    probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
+              ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
     if kind == "camera":
-        out.append(_probed("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)", _probe(scene, "cgt", {}, rays)))
+        probed.append(("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)"))
     ckind = kind if kind in cal else "random"
     # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
     _, feats = Selector(kind=ckind, sample_rays=1000, seed=seed).probe(scene, rays if kind == ckind else None)
+    out = []
     for hier, (est, rel) in cal[ckind].items():
         T_BH, t_RH = est.predict(feats["N"], feats)
         if T_BH <= PROBE_BUILD_MAX_S:
-            how = f"probed (built and traced: its estimated build, {T_BH * 1e3:.0f} ms, is cheap)"
-            out.append(_probed(hier, {}, how, _probe(scene, hier, {}, rays)))
+            probed.append((hier, {}, f"probed (its estimated build, {T_BH * 1e3:.0f} ms, is cheap)"))
             continue
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
+    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], rays, repeats=5, build_repeats=None)
+    for structure, params, how in probed:
+        g = got[structure]
+        hb, hr = max(PROBE_FLOOR, g["build_spread"] / 2), max(PROBE_FLOOR, g["ray_spread"] / 2)
+        out.append({"structure": structure, "params": params, "how": how, "build_s": g["build_s"],
+                    "ray_s": g["ray_s"], "rel_build": (-hb, hb), "rel_ray": (-hr, hr)})
     return out
 
 
@@ -170,30 +151,45 @@ def with_totals(cands: list[dict], R: float) -> list[dict]:
     return sorted(out, key=lambda c: c["predicted_s"])
 
 
-def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0) -> dict:
-    """The measured truth of ``structures`` [(structure, params), …] on ``n_rays`` fresh rays of
-    ``kind`` (seed + 1: other rays than the probes'): build seconds = median of ``repeats`` builds
-    after a warm-up (wall clock), per-ray seconds = median over ``repeats`` interleaved rounds of
-    tracing all the rays with every structure (:func:`tracer.timing.time_paired`, default clock), so
-    a busy phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s}."""
+def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: int | None = 5) -> dict:
+    """Build and time ``structures`` [(structure, params), …] on ``rays``: build seconds = median of
+    ``build_repeats`` builds after a warm-up (wall clock; None: 3 builds when one takes under
+    PROBE_REBUILD_S, else 1), per-ray seconds = median over ``repeats`` interleaved rounds of tracing
+    all the rays with every structure (:func:`tracer.timing.time_paired`, default clock), so a busy
+    phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s,
+    build_spread, ray_spread (relative: (max - min) / median), rays}."""
     import numpy as np
     from tracer.accel import build
-    from tracer.rays import make_rays
     from tracer.timing import build_clock, time_paired
-    rays = make_rays(scene, kind, int(n_rays), seed=seed + 1)
     o, d = rays.origins, rays.directions
     accs, builds = {}, {}
     for structure, params in structures:
+        t0 = build_clock()
         accs[structure] = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
+        first = build_clock() - t0
+        n = build_repeats or (3 if first < PROBE_REBUILD_S else 1)
         ts = []
-        for _ in range(max(1, repeats)):
+        for _ in range(max(1, n)):
             t0 = build_clock()
             build(scene, structure, **params)
             ts.append(build_clock() - t0)
-        builds[structure] = float(np.median(ts))
+        builds[structure] = np.asarray(ts)
     tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
-                     rounds=max(1, repeats), repeats=1)
-    return {k: {"build_s": builds[k], "ray_s": float(np.median(tm[k])) / rays.n, "rays": rays.n} for k in accs}
+                     rounds=max(1, repeats), repeats=1, min_sample=0.005)
+    out = {}
+    for k in accs:
+        b, t = builds[k], np.asarray(tm[k])
+        out[k] = {"build_s": float(np.median(b)), "ray_s": float(np.median(t)) / rays.n,
+                  "build_spread": float(np.ptp(b) / np.median(b)), "ray_spread": float(np.ptp(t) / np.median(t)),
+                  "rays": rays.n}
+    return out
+
+
+def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0) -> dict:
+    """The measured truth of ``structures`` on ``n_rays`` fresh rays of ``kind`` (seed + 1: other
+    rays than the probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
+    from tracer.rays import make_rays
+    return time_structures(scene, structures, make_rays(scene, kind, int(n_rays), seed=seed + 1), repeats, repeats)
 
 
 def _check(scene, kind, R, cands, seed) -> None:
