@@ -74,5 +74,13 @@ def test_row_goals_and_summary():
     cdf = pd.DataFrame([{"scene": "x", "ray_kind": "random", "structure": "grid", "pred_build_ms": 1.0,
                          "meas_build_ms": 2.0, "build_err_pct": -50.0, "pred_ray_ns": 3.0, "meas_ray_ns": 3.0,
                          "ray_err_pct": 0.0, "how": "probed"}])
+    cands = [{"structure": "bvh", "pred_build_ms": 100.0, "meas_build_ms": 100.0, "build_err_pct": 0.0,
+              "pred_ray_ns": 2000.0, "meas_ray_ns": 1200.0, "ray_err_pct": 66.7},
+             {"structure": "grid", "pred_build_ms": 10.0, "meas_build_ms": 500.0, "build_err_pct": -98.0,
+              "pred_ray_ns": 1000.0, "meas_ray_ns": 1000.0, "ray_err_pct": 0.0}]
+    assert advise_check.diagnose(r2, cands) == "pick: bvh per ray +67 %; prediction: bvh per ray +67 %"
+    assert advise_check.diagnose(dict(r2, R=1.0), cands) == "pick: grid build -98 %; prediction: bvh per ray +67 %"
+    assert advise_check.diagnose(r, cands) == ""
+    r, r2 = dict(r, cause=""), dict(r2, cause="x")
     md = advise_check._summary(pd.DataFrame([r, r2]), cdf, {"x": ("test", "a test")}, 1000, 3)
     assert "pick 1 of 2, prediction 1 of 2" in md and "| x | random | 1e+06 | bvh | grid | 5.0 |" in md

@@ -63,8 +63,34 @@ def check_scene(scene, kind: str, cal, n_rays: int, repeats: int, seed: int) -> 
         ranked = advise.with_totals(cands, R)
         meas = {k: v["build_s"] + R * v["ray_s"] for k, v in truth.items()}
         pick, best = ranked[0], min(meas, key=meas.get)
-        rows.append(summarise_row(scene, kind, R, pick, meas, best, truth[pick["structure"]]["rays"]))
+        row = summarise_row(scene, kind, R, pick, meas, best, truth[pick["structure"]]["rays"])
+        rows.append(dict(row, cause=diagnose(row, per_cand)))
     return rows, per_cand
+
+
+def diagnose(row: dict, per_cand: list[dict]) -> str:
+    """Which predicted part made a row miss a goal: for a wrong pick, the part (build or per ray, of
+    the pick or of the measured best) whose error weighs most in R rays; for a prediction off by more
+    than 20 %, the pick's part that carries most of the error. Empty when both goals are met."""
+    by = {c["structure"]: c for c in per_cand}
+    R, out = row["R"], []
+
+    def part_errors(name):
+        c = by[name]
+        return {f"{name} build": (c["pred_build_ms"] - c["meas_build_ms"]) * 1e-3,
+                f"{name} per ray": R * (c["pred_ray_ns"] - c["meas_ray_ns"]) * 1e-9}, c
+
+    if not row["pick_ok"]:
+        e = {**part_errors(row["pick"])[0], **part_errors(row["measured_best"])[0]}
+        k = max(e, key=lambda x: abs(e[x]))
+        c = by[k.split()[0]]
+        pct = c["build_err_pct"] if k.endswith("build") else c["ray_err_pct"]
+        out.append(f"pick: {k} {pct:+.0f} %")
+    if not row["pred_ok"]:
+        e, c = part_errors(row["pick"])
+        k = max(e, key=lambda x: abs(e[x]))
+        out.append(f"prediction: {k} {c['build_err_pct'] if k.endswith('build') else c['ray_err_pct']:+.0f} %")
+    return "; ".join(out)
 
 
 def summarise_row(scene, kind, R, pick, meas, best, rays) -> dict:
@@ -124,12 +150,12 @@ def _summary(df: pd.DataFrame, cdf: pd.DataFrame, meshes: dict, n_rays: int, rep
              f"**pred. err** = pick's predicted total over its measured total − 1 (goal within ±20 %). Times in "
              f"seconds. The machine has 2 cores shared with other jobs: per-ray times are paired, builds are not.",
              "", "| scene | kind | R | pick | measured best | loss % | predicted (s) | interval (s) | measured (s) | "
-             "pred. err % | goals |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "pred. err % | goals | largest part error |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in df.itertuples():
         goals = ("pick ✓" if r.pick_ok else "pick ✗") + (", pred ✓" if r.pred_ok else ", pred ✗")
         lines.append(f"| {r.scene} | {r.ray_kind} | {r.R:.0e} | {r.pick} | {r.measured_best} | {r.pick_loss_pct:.1f} | "
                      f"{r.predicted_s:.3g} | {r.predicted_lo:.3g} – {r.predicted_hi:.3g} | {r.pick_measured_s:.3g} | "
-                     f"{r.pred_err_pct:+.1f} | {goals} |")
+                     f"{r.pred_err_pct:+.1f} | {goals} | {r.cause or '–'} |")
     lines += ["", f"Goals met: pick {int(df.pick_ok.sum())} of {len(df)}, prediction {int(df.pred_ok.sum())} of "
               f"{len(df)}, measured total inside the predicted interval {int(df.measured_in_interval.sum())} of {len(df)}.",
               "", "## Every candidate: predicted against measured parts", "",
