@@ -117,7 +117,8 @@ def main(ctx, args) -> int:
         best = float(k.anchored_ns_per_ray.min())
         scene = load_family_scene(name)
         best_M = float(k.loc[k.anchored_ns_per_ray.idxmin()].cells)
-        base = {"family": family, "scene": name, "N": scene.n, "best_M": best_M, "rays": int(k.rays.iloc[0])}
+        base = {"family": family, "scene": name, "N": scene.n, "best_M": best_M, "rays": int(k.rays.iloc[0]),
+                "sweep_spread_pct": 100 * float(k.spread.median())}
         for rule, m in rule_cells(scene, ratio, counters=k).items():
             t = time_at(k.cells.values, k.anchored_ns_per_ray.values, m)
             rows.append({**base, "rule": rule, "M": m, "M_over_N": m / scene.n,
@@ -169,10 +170,12 @@ def _summary(df: pd.DataFrame, ratio: float) -> str:
              f"Ti/Ts of 2N·Ti/Ts = {ratio:.2f} (counter model, pooled over every point)."
              + ("" if MEMORY_AWARE in rules else " The memory-aware rule is not in the map yet: it appears when "
                 "`costmodel.memory.memory_aware_cells` exists (hook: `rule_cells`)."), "",
-             "| family | scene | N | " + " | ".join(rules) + " |", "|---|---|---|" + "---|" * len(rules)]
+             "Sweep spread: the median over the scene's swept points of (slowest - fastest) / median of a point's "
+             "repeats (its timing noise); penalties below it are not resolved.", "",
+             "| family | scene | N | sweep spread % | " + " | ".join(rules) + " |", "|---|---|---|---|" + "---|" * len(rules)]
     for (family, scene), g in df.groupby(["family", "scene"], sort=False):
         by = {r.rule: r for r in g.itertuples()}
-        lines.append(f"| {family} | {scene} | {g.N.iloc[0]:,} | "
+        lines.append(f"| {family} | {scene} | {g.N.iloc[0]:,} | {g.sweep_spread_pct.iloc[0]:.0f} | "
                      + " | ".join(_cell(by[r].penalty_pct, by[r].outside_sweep) for r in rules) + " |")
     stats = df.dropna(subset=["penalty_pct"]).groupby("rule").penalty_pct.agg(["median", "max"])
     lines += ["", "## Where each rule fails", ""]
