@@ -108,7 +108,8 @@ def summarise_row(scene, kind, R, pick, meas, best, rays) -> dict:
 
 def main(ctx, args) -> int:
     from tracer.scene import load_scene
-    started = time.time()
+    import os
+    started, load0 = time.time(), os.getloadavg()[0]
     threads = set_threads(args.threads or 1)
     meshes = QUICK_MESHES if args.quick else MESHES
     names = [s.strip() for s in args.scenes.split(",")] if args.scenes else list(meshes)
@@ -127,10 +128,15 @@ def main(ctx, args) -> int:
     out_dir = Path(args.out) / "advise-check"
     ctx.write_csv(out_dir / "advise_check.csv", df)
     ctx.write_csv(out_dir / "candidates.csv", cdf)
-    md = _summary(df, cdf, {**MESHES, **QUICK_MESHES}, n_rays, repeats)
+    from tracer.timing import clock_name
+    load = (load0, os.getloadavg()[0])
+    md = _summary(df, cdf, {**MESHES, **QUICK_MESHES}, n_rays, repeats) + (
+        f"\nClock of the traces: {clock_name()}; 1-minute load average {load[0]:.1f} at the start, {load[1]:.1f} at the "
+        f"end, on {os.cpu_count()} cores (above the core count, other processes take turns with these timings: "
+        f"per-ray times of one candidate measured minutes apart — probe and truth — differ by their loads).\n")
     atomic_write(out_dir / "summary.md", md)
     ctx.write_meta(out_dir, "advise-check", started, threads=threads, rays=n_rays, repeats=repeats,
-                   scenes=names, quick=args.quick)
+                   scenes=names, quick=args.quick, load_average=load)
     if args.json:
         from experiments.core.common import emit_json
         emit_json({"rows": df.to_dict(orient="records")})
