@@ -50,6 +50,10 @@ PROBE_FLOOR = 0.10
 PROBE_REBUILD_S = 0.5
 #: a hierarchy whose estimated build takes at most this is built and probed like the grids
 PROBE_BUILD_MAX_S = 2.0
+#: a timed trace sample repeats the rays until it lasts this long: longer than the time slices a
+#: loaded machine hands out, so one preemption does not make a sample (camera rays: 20,000 rays
+#: can take 4 ms)
+MIN_SAMPLE_S = 0.05
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
 
@@ -175,7 +179,7 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
             ts.append(build_clock() - t0)
         builds[structure] = np.asarray(ts)
     tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
-                     rounds=max(1, repeats), repeats=1, min_sample=0.005)
+                     rounds=max(1, repeats), repeats=1, min_sample=MIN_SAMPLE_S)
     out = {}
     for k in accs:
         b, t = builds[k], np.asarray(tm[k])
