@@ -40,6 +40,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "stability": ("experiments.ize.stability", "where each rule fails: penalty of 8N, 2N·Ti/Ts, 8N^1.5, pbrt, Wald's lambda against N and scene family"),
     "table3": ("experiments.ize.table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
     "advise": ("experiments.tools.advise", "which structure to build for your mesh and ray budget: predicted build + trace times, pick, --check"),
+    "advise-check": ("experiments.tools.advise_check", "advise on four meshes outside its calibration: pick vs measured best, predicted vs measured totals"),
     "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 

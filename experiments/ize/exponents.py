@@ -5,6 +5,7 @@ paper reports in its conclusion (7/9 compact, 4/3 skinny)."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -30,7 +31,43 @@ FAMILIES = {
                           ["cylinder-196", "cylinder-996", "cylinder-3996"], "skinny", 1.5, 4 / 3),
     "particles (scattered)": (["particles-1k", "particles-10k", "particles-100k"], ["particles-1k", "particles-4k", "particles-16k"],
                               "compact", 1.0, None),
+    # no quick scenes: like the dragons, these families are left out of --quick (CI time)
+    "CAD (fandisk)": (["fandisk", "fandisk-x4", "fandisk-x16"], [], "compact", 1.0, None),
+    "teapot in stadium": (["teapot-in-stadium", "teapot-x4-in-stadium", "teapot-x16-in-stadium"], [],
+                          "compact", 1.0, None),
 }
+
+
+def subdivide(tris: np.ndarray, times: int = 1) -> np.ndarray:
+    """Midpoint subdivision, each triangle into 4 (``times`` times): N -> 4^times N with the same
+    surface, so a family keeps its shape and its spread of triangle sizes while N grows."""
+    t = np.asarray(tris, np.float64)
+    for _ in range(times):
+        a, b, c = t[:, 0], t[:, 1], t[:, 2]
+        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+        t = np.stack([np.stack(v, 1) for v in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], 1).reshape(-1, 3, 3)
+    return t.astype(np.float32)
+
+
+#: scenes of the families above that the scene registry does not name: ``<mesh>-x4`` / ``-x16`` =
+#: the mesh subdivided once / twice (:func:`subdivide`); ``teapot-x<k>-in-stadium`` = the stadium of
+#: :func:`tracer.procedural.teapot_in_stadium` around the subdivided teapot
+DERIVED = re.compile(r"^(?P<mesh>[a-z0-9-]+?)-x(?P<k>4|16)(?P<stadium>-in-stadium)?$")
+
+
+def load_family_scene(name: str):
+    """A scene of :data:`FAMILIES` by name: the registry's (:func:`tracer.scene.load_scene`), or a
+    :data:`DERIVED` one built here from the registry's meshes."""
+    from tracer.procedural import teapot_in_stadium
+    from tracer.scenetype import Scene
+    m = DERIVED.match(name)
+    if m is None:
+        return load_scene(name)
+    base = load_scene(m["mesh"])
+    fine = Scene(subdivide(base.tris, {"4": 1, "16": 2}[m["k"]]), name, "derived")
+    if not m["stadium"]:
+        return fine
+    return Scene(teapot_in_stadium(lambda _: fine), name, "derived")
 
 
 #: two-level family (Ize Eq 13, M1 ∝ N^(3/5)): tiny triangles on a sphere, points on a surface as
@@ -72,7 +109,7 @@ def two_level_row(names, n_rays, seed) -> dict:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--families", default=None, help="comma-separated family prefixes (bunny,dragon,cylinder,particles)")
+    p.add_argument("--families", default=None, help="comma-separated family prefixes (bunny,dragon,cylinder,particles,CAD,teapot)")
     p.add_argument("--rays", type=int, default=None, help="random rays per point (default 100000 compact, 50000 skinny)")
     p.add_argument("--repeats", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
@@ -105,12 +142,14 @@ def main(ctx, args) -> int:
     rows, points = [], []
     for fam, (full, quick_list, kind, theory, paper_emp) in fams.items():
         names = quick_list if args.quick else full
+        if not names:
+            continue
         n_rays = args.rays or ((5_000 if kind == "skinny" else 10_000) if args.quick else
                                (50_000 if kind == "skinny" else 100_000))
         repeats = args.repeats or (3 if args.quick else 5)
         Ns, Ms, Mw = [], [], []
         for name in names:
-            scene = load_scene(name)
+            scene = load_family_scene(name)
             m, df = best_m(scene, kind, n_rays, repeats, store, args.quick, args.seed)
             Ns.append(scene.n)
             Ms.append(m)

@@ -6,14 +6,20 @@ For each candidate — the uniform grid at Ize's M = 8N, the two-level grid at M
 the kd-tree and the BVH (and coherent grid packets for camera rays) — it predicts the total time for
 R rays, build plus trace, with an interval, and picks the fastest:
 
-* **Grids** are probed, as Hapala 2011's decision algorithm does: built (timed, wall clock) and a
-  sample of 20,000 of the rays traced (median of 5 after a warm-up: the steady state of a long
-  run); the interval is the spread of the repeats, at least ±10 %.
-* **Hierarchies** are predicted without building them, from a calibration on this host: table1h's
-  measurements of a few small built-in scenes (stored like every point, so the first call measures
-  and later calls reuse it) fit the estimator of :class:`costmodel.select.GridcostEstimator`
-  (build time and per-ray time from N and the probed grid's counters); the interval is the 10-90 %
-  range of its leave-one-scene-out relative errors.
+* **Grids** are probed, as Hapala 2011's decision algorithm does: built (wall clock, the median of
+  3 builds when cheap) and a sample of 20,000 rays traced (median of 5 interleaved rounds of every
+  probed candidate after a warm-up: the steady state of a long run, and a busy phase of a shared
+  machine cannot reorder them; camera rays are whole 8x8 packets spread over a 200,000-pixel frame,
+  the frame a long run traces); the interval is the spread of the repeats, at least ±10 %.
+* **Hierarchies** (kd-tree, BVH) are probed with them when cheap: when the calibration's estimate
+  of their build is at most 2 s. Above that they are predicted without building them, from a
+  calibration on this host: table1h's measurements of a few small built-in scenes (stored like every
+  point, so the first call measures and later calls reuse it) fit the estimator of
+  :class:`costmodel.select.GridcostEstimator` (build time and per-ray time from N and the probed
+  grid's counters); the interval is the 10-90 % range of its leave-one-scene-out relative errors.
+  (``advise-check`` found the estimator off by -57 to +85 % in build and -70 to +129 % per ray on
+  meshes 1-50x larger than its calibration scenes, on a loaded machine: it ranks close structures
+  wrongly, so it is only the fallback for builds too dear to probe.)
 
 ``--check`` builds and times the three best candidates on R rays (at most 200,000 traced; the rest
 scaled) and prints measured beside predicted.
@@ -40,6 +46,16 @@ QUICK_CAL_CFG = dict(CAL_CFG, rays=1000, repeats=2, samples=[300, 1000])
 PROBE_RAYS, CHECK_RAYS = 20_000, 200_000
 #: relative half-width floor of a probed interval (single-pass timings of a shared machine)
 PROBE_FLOOR = 0.10
+#: a probe's build is timed 3 times (median) when one build takes less than this
+PROBE_REBUILD_S = 0.5
+#: a hierarchy whose estimated build takes at most this is built and probed like the grids
+PROBE_BUILD_MAX_S = 2.0
+#: a timed trace sample repeats the rays until it lasts this long: longer than the time slices a
+#: loaded machine hands out, so one preemption does not make a sample (camera rays: 20,000 rays
+#: can take 4 ms)
+MIN_SAMPLE_S = 0.05
+#: rays per packet of the coherent grid (8x8 tiles of camera rays)
+PACKET = 64
 
 
 def add_arguments(p) -> None:
@@ -52,7 +68,7 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def _calibration(ctx, log) -> dict:
+def calibration(ctx, log) -> dict:
     """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}."""
     from costmodel.select import GridcostEstimator, loo_errors, records
     from experiments.hapala.table1 import measure_all
@@ -77,64 +93,117 @@ def _calibration(ctx, log) -> dict:
     return out
 
 
-def _probe(scene, structure: str, params: dict, rays, seed: int) -> dict:
-    """Build (wall clock) and trace a sample of ``rays`` once: build seconds, per-ray seconds and the
-    relative spread of the sample's parts."""
-    from tracer.accel import build
-    from tracer.timing import build_clock, time_call
-    build(scene, structure, **params)  # compile / warm outside the timing
-    t0 = build_clock()
-    acc = build(scene, structure, **params)
-    t_build = build_clock() - t0
-    o, d = rays.origins[:PROBE_RAYS], rays.directions[:PROBE_RAYS]
-    tm = time_call(lambda: acc.intersect(o, d, counters=False), repeats=5, min_sample=0.005)
-    half = max(PROBE_FLOOR, tm.spread / 2)
-    return {"build_s": t_build, "ray_s": tm.median / len(o), "rel": (-half, half), "stats": acc.stats()}
+def probe_rays(scene, kind: str, seed: int):
+    """The probes' rays: PROBE_RAYS of ``kind``. Camera rays are whole 8x8 packets picked evenly from
+    a frame of CHECK_RAYS pixels (the frame --check and a long run trace), not a smaller frame: a
+    packet's coherence, and so a packet tracer's time per ray, depends on the frame's resolution."""
+    import numpy as np
+    from tracer.rays import Rays, make_rays
+    if kind != "camera":
+        return make_rays(scene, kind, PROBE_RAYS, seed=seed)
+    full = make_rays(scene, kind, CHECK_RAYS, seed=seed)
+    tiles = np.arange(full.n // PACKET)
+    pick = tiles[np.linspace(0, len(tiles) - 1, min(len(tiles), PROBE_RAYS // PACKET)).astype(int)]
+    idx = (pick[:, None] * PACKET + np.arange(PACKET)[None, :]).ravel()
+    return Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed)
 
 
-def _candidates(scene, kind, R, cal, seed, log) -> list[dict]:
+def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
+    """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
+    (independent of R: :func:`with_totals` adds the totals). The grids, and each hierarchy whose
+    build the calibration estimates at most PROBE_BUILD_MAX_S (cheap next to any budget worth
+    advice), are probed together (:func:`time_structures` on the probe rays: builds timed, traces
+    timed in interleaved rounds, so a busy phase of a shared machine hits all of them alike and
+    cannot reorder them); the other hierarchies are estimated from the calibration."""
     from costmodel.select import Selector
-    from tracer.rays import make_rays
-    rays = make_rays(scene, kind, PROBE_RAYS, seed=seed)
-    out = []
-    for structure, params, label in (("grid", {"factor": 8.0}, "M = 8N (Ize Eq 4, Ti/Ts = 4)"),
-                                     ("nested", {"levels": 2}, "M1 = (8N)^0.6, M2 = 8 N2 (Ize Eq 12-13)")):
-        p = _probe(scene, structure, params, rays, seed)
-        out.append({"structure": structure, "params": params, "how": f"probed ({label})", "build_s": p["build_s"],
-                    "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+    rays = probe_rays(scene, kind, seed)
+    probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
+              ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
     if kind == "camera":
-        p = _probe(scene, "cgt", {}, rays, seed)
-        out.append({"structure": "cgt", "params": {}, "how": "probed (Wald 2006, lambda = 5, 8x8 packets)",
-                    "build_s": p["build_s"], "ray_s": p["ray_s"], "rel_build": (0.0, 0.0), "rel_ray": p["rel"]})
+        probed.append(("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)"))
     ckind = kind if kind in cal else "random"
     # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
     _, feats = Selector(kind=ckind, sample_rays=1000, seed=seed).probe(scene, rays if kind == ckind else None)
+    out = []
     for hier, (est, rel) in cal[ckind].items():
         T_BH, t_RH = est.predict(feats["N"], feats)
+        if T_BH <= PROBE_BUILD_MAX_S:
+            probed.append((hier, {}, f"probed (its estimated build, {T_BH * 1e3:.0f} ms, is cheap)"))
+            continue
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
-    for c in out:
+    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], rays, repeats=5, build_repeats=None)
+    for structure, params, how in probed:
+        g = got[structure]
+        hb, hr = max(PROBE_FLOOR, g["build_spread"] / 2), max(PROBE_FLOOR, g["ray_spread"] / 2)
+        out.append({"structure": structure, "params": params, "how": how, "build_s": g["build_s"],
+                    "ray_s": g["ray_s"], "rel_build": (-hb, hb), "rel_ray": (-hr, hr)})
+    return out
+
+
+def with_totals(cands: list[dict], R: float) -> list[dict]:
+    """Copies of ``cands`` with the predicted total for R rays (build + R x per ray) and its
+    interval (each part's relative interval applied to it), fastest first."""
+    out = []
+    for c in cands:
+        c = dict(c)
         c["predicted_s"] = c["build_s"] + R * c["ray_s"]
         c["predicted_lo"] = c["build_s"] * (1 + c["rel_build"][0]) + R * c["ray_s"] * (1 + c["rel_ray"][0])
         c["predicted_hi"] = c["build_s"] * (1 + c["rel_build"][1]) + R * c["ray_s"] * (1 + c["rel_ray"][1])
+        out.append(c)
     return sorted(out, key=lambda c: c["predicted_s"])
+
+
+def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: int | None = 5) -> dict:
+    """Build and time ``structures`` [(structure, params), …] on ``rays``: build seconds = median of
+    ``build_repeats`` builds after a warm-up (wall clock; None: 3 builds when one takes under
+    PROBE_REBUILD_S, else 1), per-ray seconds = median over ``repeats`` interleaved rounds of tracing
+    all the rays with every structure (:func:`tracer.timing.time_paired`, default clock), so a busy
+    phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s,
+    build_spread, ray_spread (relative: (max - min) / median), rays}."""
+    import numpy as np
+    from tracer.accel import build
+    from tracer.timing import build_clock, time_paired
+    o, d = rays.origins, rays.directions
+    accs, builds = {}, {}
+    for structure, params in structures:
+        t0 = build_clock()
+        accs[structure] = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
+        first = build_clock() - t0
+        n = build_repeats or (3 if first < PROBE_REBUILD_S else 1)
+        ts = []
+        for _ in range(max(1, n)):
+            t0 = build_clock()
+            build(scene, structure, **params)
+            ts.append(build_clock() - t0)
+        builds[structure] = np.asarray(ts)
+    tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
+                     rounds=max(1, repeats), repeats=1, min_sample=MIN_SAMPLE_S)
+    out = {}
+    for k in accs:
+        b, t = builds[k], np.asarray(tm[k])
+        out[k] = {"build_s": float(np.median(b)), "ray_s": float(np.median(t)) / rays.n,
+                  "build_spread": float(np.ptp(b) / np.median(b)), "ray_spread": float(np.ptp(t) / np.median(t)),
+                  "rays": rays.n}
+    return out
+
+
+def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0) -> dict:
+    """The measured truth of ``structures`` on ``n_rays`` fresh rays of ``kind`` (seed + 1: other
+    rays than the probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
+    from tracer.rays import make_rays
+    return time_structures(scene, structures, make_rays(scene, kind, int(n_rays), seed=seed + 1), repeats, repeats)
 
 
 def _check(scene, kind, R, cands, seed) -> None:
     """Build and time the three best candidates: measured_s = build + R x per-ray time."""
-    from tracer.accel import build
-    from tracer.rays import make_rays
-    from tracer.timing import build_clock, time_call
-    rays = make_rays(scene, kind, int(min(max(R, 1000), CHECK_RAYS)), seed=seed + 1)
+    n = int(min(max(R, 1000), CHECK_RAYS))
+    truth = measure(scene, kind, [(c["structure"], c["params"]) for c in cands[:3]], n, seed=seed)
     for c in cands[:3]:
-        build(scene, c["structure"], **c["params"])
-        t0 = build_clock()
-        acc = build(scene, c["structure"], **c["params"])
-        tb = build_clock() - t0
-        tm = time_call(lambda: acc.intersect(rays.origins, rays.directions, counters=False), repeats=5)
-        c["measured_s"] = tb + R * tm.median / rays.n
-        c["measured_build_s"], c["measured_ray_s"] = tb, tm.median / rays.n
+        m = truth[c["structure"]]
+        c["measured_s"] = m["build_s"] + R * m["ray_s"]
+        c["measured_build_s"], c["measured_ray_s"] = m["build_s"], m["ray_s"]
 
 
 def main(ctx, args) -> int:
@@ -146,8 +215,8 @@ def main(ctx, args) -> int:
     log = (lambda *a: None) if args.json else print
     set_threads(args.threads or 1)
     scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
-    cal = _calibration(ctx, log)
-    cands = _candidates(scene, args.kind, args.rays, cal, args.seed, log)
+    cal = calibration(ctx, log)
+    cands = with_totals(predict(scene, args.kind, cal, args.seed, log), args.rays)
     if args.check:
         _check(scene, args.kind, args.rays, cands, args.seed)
     pick = cands[0]

@@ -1,0 +1,83 @@
+"""The stability map's pieces: the derived CAD / teapot-in-stadium scenes, the rules (with the
+memory-aware hook), the interpolation, the two-level point and the failure sentence."""
+from __future__ import annotations
+
+import importlib.machinery
+import sys
+import types
+
+import numpy as np
+import pandas as pd
+
+from experiments.ize import exponents, stability
+
+
+def _area(t):
+    t = np.asarray(t, np.float64)
+    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum()
+
+
+def test_subdivide_keeps_the_surface(load):
+    base = load("suzanne").tris
+    fine = exponents.subdivide(base, 2)
+    assert fine.shape == (16 * len(base), 3, 3) and fine.dtype == np.float32
+    assert np.isclose(_area(fine), _area(base), rtol=1e-5)
+    np.testing.assert_allclose(fine.reshape(-1, 3).min(0), base.reshape(-1, 3).min(0), atol=1e-6)
+
+
+def test_family_scenes(load):
+    s = exponents.load_family_scene("suzanne-x4")
+    assert s.n == 4 * load("suzanne").n and s.name == "suzanne-x4"
+    st = exponents.load_family_scene("teapot-x4-in-stadium")
+    pot = load("teapot").n
+    stadium = load("teapot-in-stadium").n - pot
+    assert st.n == 4 * pot + stadium and stadium > 0
+    assert exponents.load_family_scene("teapot-in-stadium").n == pot + stadium
+    fams = {k: v for k, v in exponents.FAMILIES.items() if k.startswith(("CAD", "teapot"))}
+    assert len(fams) == 2 and all(len(v[0]) >= 3 and v[1] == [] for v in fams.values())
+
+
+def test_rule_cells_and_the_memory_hook(load, monkeypatch):
+    scene = load("bunny-948")
+    rules = stability.rule_cells(scene, 4.0)
+    assert rules["8N (Ize Eq 4, Ti/Ts = 4)"] == 8 * 948 == rules["2N·Ti/Ts (Eq 4, Ti/Ts fitted here)"]
+    assert stability.MEMORY_AWARE not in rules or stability.memory_rule() is not None
+    fake = types.ModuleType("costmodel.memory")
+    fake.__spec__ = importlib.machinery.ModuleSpec("costmodel.memory", None)
+    seen = {}
+
+    def memory_aware_cells(scene, counters):
+        seen["n"] = len(counters)
+        return 1234.0
+    fake.memory_aware_cells = memory_aware_cells
+    monkeypatch.setitem(sys.modules, "costmodel.memory", fake)
+    k = pd.DataFrame({"cells": [100.0, 1000.0], "anchored_ns_per_ray": [2.0, 1.0]})
+    rules = stability.rule_cells(scene, 4.0, counters=k)
+    assert rules[stability.MEMORY_AWARE] == 1234.0 and seen["n"] == 2
+    assert stability.MEMORY_AWARE not in stability.rule_cells(scene, 4.0)
+
+
+def test_time_at_interpolates_in_log_log_and_never_extrapolates():
+    cells, t = np.array([100.0, 10_000.0]), np.array([4.0, 1.0])
+    assert np.isclose(stability.time_at(cells, t, 1000.0), 2.0)
+    assert np.isnan(stability.time_at(cells, t, 50.0)) and np.isnan(stability.time_at(cells, t, 2e4))
+
+
+def test_two_level_point_is_paired_with_the_sweeps_reference(load, tmp_path):
+    from experiments.core.context import RunContext
+    from experiments.core.sweep import sweep
+    from tracer.rays import make_rays
+    scene = load("bunny-948")
+    store = RunContext(out=tmp_path, threads=1, quick=True).store()
+    rays = {"random": make_rays(scene, "random", 2000, seed=3)}
+    k = pd.DataFrame(sweep(scene, "grid", [{"cells": 8.0 * scene.n}], rays, store, 1))
+    pen, row = stability.two_level_penalty(scene, k, store, 1)
+    assert row["structure"] == "nested" and row["rays"] == 2000 and row["seed"] == 3
+    assert np.isclose(pen, 100 * (row["ratio_to_ref"] / k.ratio_to_ref.iloc[0] - 1)) and pen > -100
+
+
+def test_where_fails_names_families_and_sizes():
+    df = pd.DataFrame({"rule": ["r"] * 3, "family": ["a", "a", "b"], "N": [10, 100, 5],
+                       "penalty_pct": [3.0, 25.0, np.nan]})
+    assert stability.where_fails(df, "r") == "fails (> 10 %) on a (1 of 2, N = 100; worst 25 %)"
+    assert "within 10 %" in stability.where_fails(df.assign(penalty_pct=1.0), "r")
