@@ -2,9 +2,6 @@
 memory-aware hook), the interpolation, the two-level point and the failure sentence."""
 from __future__ import annotations
 
-import importlib.machinery
-import sys
-import types
 
 import numpy as np
 import pandas as pd
@@ -37,24 +34,12 @@ def test_family_scenes(load):
     assert len(fams) == 2 and all(len(v[0]) >= 3 and v[1] == [] for v in fams.values())
 
 
-def test_rule_cells_and_the_memory_hook(load, monkeypatch):
+def test_rule_cells_and_the_memory_rule(load):
     scene = load("bunny-948")
     rules = stability.rule_cells(scene, 4.0)
     assert rules["8N (Ize Eq 4, Ti/Ts = 4)"] == 8 * 948 == rules["2N·Ti/Ts (Eq 4, Ti/Ts fitted here)"]
-    assert stability.MEMORY_AWARE not in rules or stability.memory_rule() is not None
-    fake = types.ModuleType("costmodel.memory")
-    fake.__spec__ = importlib.machinery.ModuleSpec("costmodel.memory", None)
-    seen = {}
-
-    def memory_aware_cells(scene, counters):
-        seen["n"] = len(counters)
-        return 1234.0
-    fake.memory_aware_cells = memory_aware_cells
-    monkeypatch.setitem(sys.modules, "costmodel.memory", fake)
-    k = pd.DataFrame({"cells": [100.0, 1000.0], "anchored_ns_per_ray": [2.0, 1.0]})
-    rules = stability.rule_cells(scene, 4.0, counters=k)
-    assert rules[stability.MEMORY_AWARE] == 1234.0 and seen["n"] == 2
-    assert stability.MEMORY_AWARE not in stability.rule_cells(scene, 4.0)
+    assert stability.MEMORY_AWARE not in rules
+    assert stability.rule_cells(scene, 4.0, 1234.0)[stability.MEMORY_AWARE] == 1234.0
 
 
 def test_time_at_interpolates_in_log_log_and_never_extrapolates():

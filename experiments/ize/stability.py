@@ -1,7 +1,7 @@
 """``stability``: where each resolution rule fails — the penalty of every rule (Ize's 8N and
 2N·Ti/Ts, the long-skinny 8N^1.5, pbrt's 3N^(1/3) voxels along the longest axis clamped at 64, Wald's
-lambda = 5, Ize's two-level grid M1 = (8N)^0.6, M2 = 8 N2, and a memory-aware rule once
-``costmodel.memory`` provides it) against the best swept one-level M, for every scene family of
+lambda = 5, Ize's two-level grid M1 = (8N)^0.6, M2 = 8 N2, and the memory-aware model's M with
+constants held out) against the best swept one-level M, for every scene family of
 ``exponents`` (compact scans, CAD, long skinny cylinders, scattered particles, teapot in a stadium)
 from about 200 to 871k triangles.
 
@@ -20,8 +20,6 @@ penalty: the two-level grid beats every one-level M).
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import time
 from pathlib import Path
 
@@ -29,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit
+from experiments.ize import memmodel
 from experiments.core.store import atomic_write
 from tracer.constants import IZE_M_FACTOR, PBRT_GRID_MAX_VOXELS, WALD_LAMBDA
 
@@ -40,23 +39,13 @@ def add_arguments(p) -> None:
 #: the two-level rule (a measured point of the nested grid, not a cell count on the one-level curve)
 TWO_LEVEL = "(8N)^0.6 two-level (Ize Eq 12-13, M2 = 8 N2)"
 TWO_LEVEL_PARAMS = {"levels": 2}
-#: the memory-aware rule's name (filled when costmodel.memory exists)
-MEMORY_AWARE = "memory-aware (costmodel.memory)"
+#: the memory-aware rule (experiments.ize.memmodel: costmodel.memory's model, constants from the other scenes)
+MEMORY_AWARE = "memory-aware (held-out constants)"
 
 
-def memory_rule():
-    """``costmodel.memory.memory_aware_cells`` once that module provides it (the memory-aware cost
-    model being written; its signature: ``memory_aware_cells(scene, counters=<the scene's swept
-    points: cells, refs, memory_bytes, steps, tests, anchored_ns_per_ray>) -> M``), else None: the
-    rule is then not in the map yet."""
-    if importlib.util.find_spec("costmodel.memory") is None:
-        return None
-    return getattr(importlib.import_module("costmodel.memory"), "memory_aware_cells", None)
-
-
-def rule_cells(scene, ti_over_ts: float, counters: pd.DataFrame | None = None) -> dict:
-    """Cell count of every one-level rule for ``scene`` (rule name -> M); the memory-aware rule's
-    entry is there when ``costmodel.memory`` exists and ``counters`` (the scene's swept points) are given."""
+def rule_cells(scene, ti_over_ts: float, memory_m: float | None = None) -> dict:
+    """Cell count of every one-level rule for ``scene`` (rule name -> M); ``memory_m``, the
+    memory-aware model's M (:func:`experiments.ize.memmodel.memory_aware_cells`), when given."""
     from tracer.grid import res_pbrt, res_wald
     n = scene.n
     out = {"8N (Ize Eq 4, Ti/Ts = 4)": IZE_M_FACTOR * n,
@@ -64,9 +53,8 @@ def rule_cells(scene, ti_over_ts: float, counters: pd.DataFrame | None = None) -
            "8N^1.5 (Ize Eq 8, long skinny)": IZE_M_FACTOR * n**1.5,
            f"pbrt 3N^(1/3), <= {PBRT_GRID_MAX_VOXELS}": float(np.prod(res_pbrt(scene.bounds, n))),
            f"Wald lambda = {WALD_LAMBDA:g}": float(np.prod(res_wald(scene.bounds, n)))}
-    mem = memory_rule()
-    if mem is not None and counters is not None:
-        out[MEMORY_AWARE] = float(mem(scene, counters=counters))
+    if memory_m is not None:
+        out[MEMORY_AWARE] = float(memory_m)
     return out
 
 
@@ -111,6 +99,7 @@ def main(ctx, args) -> int:
     pts = pts[(pts.ray_kind == "random") & (pts.structure == "grid")]
     ratio = CounterCostFit(n_boot=0).fit(pts.scene.tolist(), pts.steps, pts.tests, pts.anchored_ns_per_ray).ti_over_ts_
     store, repeats = ctx.store(), 3 if ctx.quick else 5
+    mach = memmodel.machine(ctx.quick)
     rows = []
     for (family, name), k in pts.groupby(["family", "scene"], sort=False):
         k = k.drop_duplicates("cells")
@@ -119,7 +108,8 @@ def main(ctx, args) -> int:
         best_M = float(k.loc[k.anchored_ns_per_ray.idxmin()].cells)
         base = {"family": family, "scene": name, "N": scene.n, "best_M": best_M, "rays": int(k.rays.iloc[0]),
                 "sweep_spread_pct": 100 * float(k.spread.median())}
-        for rule, m in rule_cells(scene, ratio, counters=k).items():
+        mem_m = memmodel.memory_aware_cells(pts, name, "random", mach)[0]
+        for rule, m in rule_cells(scene, ratio, mem_m).items():
             t = time_at(k.cells.values, k.anchored_ns_per_ray.values, m)
             rows.append({**base, "rule": rule, "M": m, "M_over_N": m / scene.n,
                          "penalty_pct": 100 * (t / best - 1) if np.isfinite(t) else np.nan,
@@ -132,8 +122,7 @@ def main(ctx, args) -> int:
     ctx.write_csv(out_dir / "stability.csv", df)
     atomic_write(out_dir / "summary.md", _summary(df, ratio))
     _figure(ctx, df)
-    ctx.write_meta(out_dir, "stability", started, ti_over_ts=ratio, threads=threads,
-                   memory_rule=memory_rule() is not None)
+    ctx.write_meta(out_dir, "stability", started, ti_over_ts=ratio, threads=threads, machine=mach.data)
     if not getattr(args, "json", False):
         print(_summary(df, ratio))
     return 0
@@ -167,9 +156,9 @@ def _summary(df: pd.DataFrame, ratio: float) -> str:
              "beside the scene's 8N reference grid, medians of 5 interleaved rounds), interpolated in log M – log t; "
              "a rule outside the swept range is marked, not extrapolated. Two-level rule: a measured point of the "
              "nested grid on the same rays, timed beside the same 8N reference; its penalty is its ratio to the reference over the best one-level point's ratio (negative: faster than every one-level M). "
-             f"Ti/Ts of 2N·Ti/Ts = {ratio:.2f} (counter model, pooled over every point)."
-             + ("" if MEMORY_AWARE in rules else " The memory-aware rule is not in the map yet: it appears when "
-                "`costmodel.memory.memory_aware_cells` exists (hook: `rule_cells`)."), "",
+             f"Ti/Ts of 2N·Ti/Ts = {ratio:.2f} (counter model, pooled over every point). Memory-aware: the M "
+             "minimising costmodel.memory's model (counters + the host's load latency at the grid's working set), "
+             "its constants fitted on every other scene of the map (held out).", "",
              "Sweep spread: the median over the scene's swept points of (slowest - fastest) / median of a point's "
              "repeats (its timing noise); penalties below it are not resolved.", "",
              "| family | scene | N | sweep spread % | " + " | ".join(rules) + " |", "|---|---|---|---|" + "---|" * len(rules)]
