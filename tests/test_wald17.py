@@ -60,3 +60,17 @@ def test_table3_quick(tmp_path):
     assert r.cells_single > 2 * r.cells_p8  # packets visit fewer cells per ray (3x at 64²)
     assert 0 < r.shadow_occluded < 1 and r.shadow_rays == round(r.hit_frac * r.rays)
     assert "(paper)" in (out / "wald-table3" / "summary.md").read_text()
+
+
+def test_lowres_and_fig8_quick(tmp_path):
+    """wald-lowres (bunny-948 at 64², 128²) and wald-fig8 (tiny scenes): real values in their CSVs."""
+    out = run_target(tmp_path, "wald-lowres", "--sides", "32,64", "--repeats", "3")
+    df = pd.read_csv(out / "wald-lowres" / "lowres.csv")
+    assert list(df.side) == [32, 64] and (df.cgt_over_embree > 0).all() and (df.cgt_over_grid > 0).all()
+    assert df.tests.iloc[0] > df.tests.iloc[1]  # a lower resolution: more triangle tests per ray
+    out = run_target(tmp_path, "wald-fig8", "--side", "32", "--repeats", "3", "--largest", "bunny-3851")
+    rb = pd.read_csv(out / "wald-fig8" / "rebuild.csv")
+    assert list(rb.lam) == [1.0, 5.0] and (rb.build_s > 0).all() and (rb.trace_s > 0).all()
+    assert rb.res.iloc[0] != rb.res.iloc[1]
+    mr = pd.read_csv(out / "wald-fig8" / "model_resolution.csv")
+    assert set(mr.scene) == {"bunny-948", "bunny-3851"} and (mr.trace_s > 0).all()
