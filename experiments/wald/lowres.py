@@ -128,13 +128,21 @@ def _summary(df, fit, rounds) -> str:
                          for s, g in GOALS.items() if (d.side == s).any())
         lines.append(f"- {name}: packets beat the single-ray grid {crossover(d, 'cgt_over_grid', 1.0)}; "
                      f"they reach Embree {crossover(d, 'cgt_over_embree', 1.0)}" + (f" ({goal})" if goal else "") + ".")
-    lines += ["", "As the side halves, a packet's frustum covers four times the scene area: tests per ray grow about "
-              "2-3x per halving (every ray of a packet is tested against every triangle the frustum meets) while "
-              "per-ray work (clipping, sorting, writing the hit) stays, so at low resolution the packets are bound "
-              "by triangle tests and per-ray overhead rather than by cell walking. Culling triangles per group of 8 "
-              "rays (each group its own frustum, the same plane test) cut the tests ~2.8x on dragon-202k at 512² but "
-              "made the trace slower (the per-group branches cost more than the SIMD lanes they save), so it is not "
-              "in the kernel. This machine is shared by other jobs: read the paired ratios, not the Mrays/s."]
+    c = fit.constants_
+    per_ray = c.get("t_setup", 0.0) * float(df.packets.mean()) + c.get("t_ray", 0.0)
+    at = {s: df[df.side == s] for s in (512, 1024)}
+    split = "; ".join(f"{s}²: tests {100 * d.share_t_test.mean():.0f} % of the time" for s, d in at.items()
+                      if len(d) and "share_t_test" in d)
+    lines += ["", "As the side halves, a packet's frustum covers four times the scene area and every ray of a packet "
+              "is tested against every triangle the frustum meets: tests per ray grow 2.5-3.5x per halving while cells "
+              f"per ray stay small. The fitted model: {c.get('t_test', float('nan')):.2f} ns per SIMD lane of a triangle "
+              f"test and about {per_ray:.0f} ns per ray of fixed cost (packet set-up and per-ray clipping, sorting "
+              "and writing are not separable here: there is one packet per 64 rays at every side)"
+              + (f"; {split}" if split else "") + ". So packets at low resolution are bound by triangle tests, not by "
+              "cell walking or set-up. Culling triangles per group of 8 rays (each group its own frustum, the "
+              "packet's plane test) cut the tests ~2.8x on dragon-202k at 512² but made the trace slower (per-group "
+              "branches and set-up cost more than the SIMD lanes they save), so it is not in the kernel. This "
+              "machine is shared by other jobs: read the paired ratios, not the Mrays/s."]
     return "\n".join(lines) + "\n"
 
 
