@@ -112,7 +112,7 @@ def _summary(rb, mr, side, rounds) -> str:
     lines += ["", f"## Model resolution at lambda = 5, 8x8 packets, {side}² camera rays", "",
               "| scene | N | grid | trace s/frame | ns per ray | build s | cells per ray | tests per ray |",
               "|---|---|---|---|---|---|---|---|"]
-    for _, r in mr.sort_values(["scene"]).iterrows():
+    for _, r in mr.sort_values(["scene", "N"], key=lambda c: c.str.split("-").str[0] if c.name == "scene" else c).iterrows():
         lines.append(f"| {r.scene} | {int(r.N):,} | {r.res} | {r.trace_s:.4f} | {r.ns_per_ray:.1f} | {r.build_s:.4f} | "
                      f"{r.cells:.3f} | {r.tests:.2f} |")
     fams = []
