@@ -26,7 +26,9 @@ packets, each thread with its own work arrays):
    widened with ``np.float64(...)``: Numba's ``float()`` keeps a float32 a float32.
 5. Termination: each ray needs slices up to its closest hit's (or its exit's); rays that need no
    more are retired (their result written, the last active ray moved into their slot) and the
-   frustum shrinks to the rest; the packet ends when none is left. Macrocells (Sec 2.4, M x M x M
+   frustum shrinks to the rest; the packet ends when none is left. Any-hit queries (``occluded``,
+   e.g. shadow packets from a point light, Sec 4.7) share this loop: a ray is retired right after
+   the triangle test that gave it a hit, not at the end of the slice. Macrocells (Sec 2.4, M x M x M
    blocks, any M): on entering a slab of M slices the frustum's overlap with the whole slab is
    tested against the macrocell occupancy and empty slabs are skipped.
 
