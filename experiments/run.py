@@ -26,7 +26,10 @@ TARGETS: dict[str, tuple[str, str]] = {
     "fig2": ("experiments.ize.fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
     "fig5": ("experiments.ize.fig5", "Ize Fig 5: two-level (m1, m2) factor plane, %% over best, theory point"),
     "wald-table1": ("experiments.wald.table1", "Wald 2006 Table 1: triangle tests with/without mailboxing and frustum culling"),
+    "wald-table3": ("experiments.wald.table3", "Wald 2006 Table 3: single-ray grid vs 8x8/4x4 packets (fps, paired), macrocells, shadow packets"),
     "wald-table4": ("experiments.wald.table4", "Wald 2006 Table 4: cells visited and tests, single ray vs 4x4 vs 8x8"),
+    "wald-fig8": ("experiments.wald.fig8", "Wald 2006 Fig 8: rebuild vs trace per frame on the largest mesh, trace time against model resolution"),
+    "wald-lowres": ("experiments.wald.lowres", "packets at low resolution: CGT vs Embree vs single-ray grid against image side (paired), work per ray"),
     "wald-fig6": ("experiments.wald.fig6", "Wald 2006 Fig 6: render time against the grid resolution factor lambda"),
     "wald-fig7": ("experiments.wald.fig7", "Wald 2006 Fig 7: time against packet size for several model resolutions"),
     "fournier-table1": ("experiments.fournier.table1", "Fournier & Poulin 1993 Table 1: sorted lists vs a 30^3 grid"),
@@ -46,7 +49,8 @@ TARGETS: dict[str, tuple[str, str]] = {
 
 #: targets that `all` runs, in order
 ALL_ORDER = ["derive", "table2", "table3", "table4", "fig2", "fig5", "exponents", "stability",
-             "table1h", "fig1h", "fig2h", "predict", "selector", "havran", "wald-table1", "wald-table4", "wald-fig6", "wald-fig7",
+             "table1h", "fig1h", "fig2h", "predict", "selector", "havran", "wald-table1", "wald-table3", "wald-table4",
+             "wald-fig6", "wald-fig7", "wald-fig8", "wald-lowres",
              "fournier-table1"]
 
 

@@ -26,7 +26,9 @@ packets, each thread with its own work arrays):
    widened with ``np.float64(...)``: Numba's ``float()`` keeps a float32 a float32.
 5. Termination: each ray needs slices up to its closest hit's (or its exit's); rays that need no
    more are retired (their result written, the last active ray moved into their slot) and the
-   frustum shrinks to the rest; the packet ends when none is left. Macrocells (Sec 2.4, M x M x M
+   frustum shrinks to the rest; the packet ends when none is left. Any-hit queries (``occluded``,
+   e.g. shadow packets from a point light, Sec 4.7) share this loop: a ray is retired right after
+   the triangle test that gave it a hit, not at the end of the slice. Macrocells (Sec 2.4, M x M x M
    blocks, any M): on entering a slab of M slices the frustum's overlap with the whole slab is
    tested against the macrocell occupancy and empty slabs are skipped.
 
@@ -59,8 +61,8 @@ from tracer.grid import fill_cells, grid_params, grid_ray, macro_occupancy, res_
 from tracer.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, _bounds, _cells, _culled, _max, _min, _retire, _span, _spread,
-    _test_tri,
+    _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, _bounds, _cells, _compact, _culled, _max, _min, _needs, _retire,
+    _span, _spread, _test_tri,
 )
 
 NCOUNT = len(COUNTER_NAMES)
@@ -285,33 +287,32 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                             acc_lanes += (n + LANES - 1) & -LANES
                             # all lanes of the last vector: slots past n hold retired or unused rays,
                             # whose results are never read (LLVM's scalar remainder loop is slow)
-                            _test_tri((n + LANES - 1) & -LANES, common, W, I, tid,
-                                      ax, ay, az, bx, by, bz, cx, cy, cz, tmin)
+                            nh = _test_tri((n + LANES - 1) & -LANES, common, W, I, tid,
+                                           ax, ay, az, bx, by, bz, cx, cy, cz, tmin)
                             changed = True
+                            if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
+                                _needs(n, True, W, I)
+                                n, retired = _compact(n, -1, W, I, out_t, out_id, counters, tested)
+                                if n == 0:
+                                    break
+                                if retired:
+                                    fr = _bounds(n, W)
+                                    if edge:
+                                        ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
+                                    nlast, nfirst = _span(n, I)
+                                    cull_now = cull and n > CULL_MIN_RAYS
+                        if n == 0:
+                            break
+                    if n == 0:
+                        break
+                if n == 0:
+                    break
                 if changed:  # a ray with a hit needs no slice past its hit's
-                    for q in range(n):
-                        if I[_BID, q] >= 0:
-                            I[_NL, q] = -1 if anyhit else min(I[_NL, q], int(math.floor(W[_KO, q] + W[_BEST, q] * W[_KD, q] + EPS)))
+                    _needs(n, anyhit, W, I)
                 # ---- retire rays that need no further slice (checked when a hit came or the earliest
                 # last slice is reached); the frustum shrinks to the rest
                 if changed or s >= nfirst:
-                    q = 0
-                    retired = False
-                    while q < n:
-                        if I[_NL, q] > s:
-                            q += 1
-                            continue
-                        retired = True
-                        i = I[_IDX, q]
-                        _retire(q, i, W, I, out_t, out_id, counters, tested)
-                        n -= 1
-                        if q < n:  # move the last active ray into slot q
-                            for row in range(_NW):
-                                W[row, q] = W[row, n]
-                            I[_BID, q] = I[_BID, n]
-                            I[_IDX, q] = I[_IDX, n]
-                            I[_NL, q] = I[_NL, n]
-                            I[_IDX, n] = i  # keep the retired ray's id for the counters
+                    n, retired = _compact(n, s, W, I, out_t, out_id, counters, tested)
                     if n == 0:
                         break
                     if retired:

@@ -44,7 +44,8 @@ def _lane(dx, dy, dz, dd, sx, sy, sz, sn, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, 
 @jit(inline="always")
 def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
     """Rays [0, n) of the packet against one triangle (float64 vertices): a loop LLVM vectorises,
-    with masked stores of the hits. With a common origin s = a - o and s.n are hoisted."""
+    with masked stores of the hits. With a common origin s = a - o and s.n are hoisted. Returns
+    how many of the n lanes hit (the any-hit kernel retires those rays at once)."""
     e1x = bx - ax
     e1y = by - ay
     e1z = bz - az
@@ -55,6 +56,7 @@ def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
     p2nn = _PAR2 * (nx * nx + ny * ny + nz * nz)
+    nh = 0
     if common:
         sx = ax - W[_OX, 0]
         sy = ay - W[_OY, 0]
@@ -63,6 +65,7 @@ def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
         for i in range(n):
             h, t = _lane(W[_DX, i], W[_DY, i], W[_DZ, i], W[_DD, i], sx, sy, sz, sn,
                          e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, W[_BEST, i])
+            nh += h
             if h:
                 W[_BEST, i] = t
                 I[_BID, i] = tid
@@ -73,9 +76,11 @@ def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
             sz = az - W[_OZ, i]
             h, t = _lane(W[_DX, i], W[_DY, i], W[_DZ, i], W[_DD, i], sx, sy, sz, sx * nx + sy * ny + sz * nz,
                          e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, W[_BEST, i])
+            nh += h
             if h:
                 W[_BEST, i] = t
                 I[_BID, i] = tid
+    return nh
 
 
 @jit(inline="always")
@@ -151,6 +156,40 @@ def _retire(q, i, W, I, out_t, out_id, counters, tested):
         out_id[i] = I[_BID, q]
     if counters is not None:
         counters[i, 2] = tested
+
+
+@jit(inline="always")
+def _needs(n, anyhit, W, I):
+    """After hits: a ray with a hit needs no slice past its hit's (closest hit), or none at all
+    (any hit: I[_NL] = -1)."""
+    for q in range(n):
+        if I[_BID, q] >= 0:
+            I[_NL, q] = -1 if anyhit else min(I[_NL, q], int(math.floor(W[_KO, q] + W[_BEST, q] * W[_KD, q] + EPS)))
+
+
+@jit(inline="always")
+def _compact(n, s, W, I, out_t, out_id, counters, tested):
+    """Retire the rays of slots [0, n) that need no slice past ``s`` (I[_NL] <= s): write their
+    results, move the last active ray into each freed slot (the retired ray's id stays at the end of
+    I[_IDX] for the counters). Returns (rays left, whether any was retired)."""
+    q = 0
+    retired = False
+    while q < n:
+        if I[_NL, q] > s:
+            q += 1
+            continue
+        retired = True
+        i = I[_IDX, q]
+        _retire(q, i, W, I, out_t, out_id, counters, tested)
+        n -= 1
+        if q < n:
+            for row in range(_NW):
+                W[row, q] = W[row, n]
+            I[_BID, q] = I[_BID, n]
+            I[_IDX, q] = I[_IDX, n]
+            I[_NL, q] = I[_NL, n]
+            I[_IDX, n] = i
+    return n, retired
 
 
 @jit(inline="always")

@@ -1,0 +1,76 @@
+"""Wald 2006 items of issue 17: packet any-hit (shadow) queries against the float64 oracle, the room
+camera from inside, and the new targets run with --quick (small scenes, small images)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from experiments.wald.views import ROOM_EYE, inside_view, light_position, shadow_rays, wald_camera
+from tracer.oracle import oracle_intersect
+from tracer.packet import CoherentGrid
+from tracer.rays import camera_frame, make_rays
+from tracer.scene import load_scene
+
+
+@pytest.fixture(scope="module")
+def bunny():
+    return load_scene("bunny-948")
+
+
+@pytest.mark.parametrize("k", (4, 8))
+def test_packet_occlusion_matches_oracle(bunny, k):
+    """Shadow packets (common origin at the light, tmax short of the hit) and random rays with a
+    finite tmax: hit/miss of the any-hit packet kernel equals the oracle's closest hit within tmax."""
+    cgt = CoherentGrid(packet=k).build(bunny)
+    prim = wald_camera(bunny, 48, k)
+    hits, _ = cgt.intersect(prim.origins, prim.directions, counters=False)
+    so, sd, stmax = shadow_rays(prim, hits.t, light_position(bunny))
+    rr = make_rays(bunny, "random", 500, seed=5)
+    for o, d, tmax in ((so, sd, stmax), (rr.origins, rr.directions, np.full(500, 0.6, np.float32))):
+        ref, _ = oracle_intersect(bunny, o, d, tmax=tmax)
+        occ = cgt.occluded(o, d, tmax)
+        np.testing.assert_array_equal(occ, ref.tri_id >= 0)
+        assert 0 < occ.sum() < len(occ)  # both outcomes occur
+
+
+def test_room_camera_is_inside(tmp_path):
+    room = load_scene("room")
+    sc, eye_dir = inside_view(room, ROOM_EYE, (1.0, 0.15, -0.12), 4.0)
+    eye = camera_frame(sc, eye_dir)[0]
+    np.testing.assert_allclose(eye, ROOM_EYE, atol=1e-9)
+    lo, hi = room.bounds
+    assert (eye > lo).all() and (eye < hi).all()
+
+
+def run_target(tmp_path, *args):
+    """Run a target in this process (kernels already compiled) into tmp_path; returns tmp_path."""
+    from experiments.run import main
+    assert main(list(args) + ["--quick", "--json", "--out", str(tmp_path)]) == 0
+    return tmp_path
+
+
+def test_table3_quick(tmp_path):
+    """wald-table3 on a small scene and image: real values in its CSV."""
+    out = run_target(tmp_path, "wald-table3", "--scenes", "bunny-948", "--side", "64", "--repeats", "3")
+    df = pd.read_csv(out / "wald-table3" / "table3.csv")
+    r = df.iloc[0]
+    assert r.rays == 64 * 64 and r.N == 948
+    assert r.ratio_p8 > 0.5 and r.single_mrays > 0 and r.p8_mrays > 0
+    assert r.cells_single > 2 * r.cells_p8  # packets visit fewer cells per ray (3x at 64²)
+    assert 0 < r.shadow_occluded < 1 and r.shadow_rays == round(r.hit_frac * r.rays)
+    assert "(paper)" in (out / "wald-table3" / "summary.md").read_text()
+
+
+def test_lowres_and_fig8_quick(tmp_path):
+    """wald-lowres (bunny-948 at 64², 128²) and wald-fig8 (tiny scenes): real values in their CSVs."""
+    out = run_target(tmp_path, "wald-lowres", "--sides", "32,64", "--repeats", "3")
+    df = pd.read_csv(out / "wald-lowres" / "lowres.csv")
+    assert list(df.side) == [32, 64] and (df.cgt_over_embree > 0).all() and (df.cgt_over_grid > 0).all()
+    assert df.tests.iloc[0] > df.tests.iloc[1]  # a lower resolution: more triangle tests per ray
+    out = run_target(tmp_path, "wald-fig8", "--side", "32", "--repeats", "3", "--largest", "bunny-3851")
+    rb = pd.read_csv(out / "wald-fig8" / "rebuild.csv")
+    assert list(rb.lam) == [1.0, 5.0] and (rb.build_s > 0).all() and (rb.trace_s > 0).all()
+    assert rb.res.iloc[0] != rb.res.iloc[1]
+    mr = pd.read_csv(out / "wald-fig8" / "model_resolution.csv")
+    assert set(mr.scene) == {"bunny-948", "bunny-3851"} and (mr.trace_s > 0).all()
