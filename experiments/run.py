@@ -23,6 +23,8 @@ TARGETS: dict[str, tuple[str, str]] = {
     "table2": ("experiments.ize.table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
     "fit": ("experiments.ize.fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
     "table4": ("experiments.ize.table4", "Ize Table 4: two-level grids, M1 = (8N)^0.6, M2 = 8N2 vs swept M1"),
+    "ize-levels": ("experiments.ize.levels", "Ize Sec 4.3: three-level grids (Eq 16) vs two levels and the best one-level grid"),
+    "ize-skinny2": ("experiments.ize.skinny2", "Ize Sec 4.4: two-level long-skinny rule (Eq 17) vs the compact rule on cylinders"),
     "fig2": ("experiments.ize.fig2", "Ize Fig 2: runtime against M with the fitted Eq 1 / Eq 5 curves"),
     "fig5": ("experiments.ize.fig5", "Ize Fig 5: two-level (m1, m2) factor plane, %% over best, theory point"),
     "wald-table1": ("experiments.wald.table1", "Wald 2006 Table 1: triangle tests with/without mailboxing and frustum culling"),
@@ -48,7 +50,7 @@ TARGETS: dict[str, tuple[str, str]] = {
 }
 
 #: targets that `all` runs, in order
-ALL_ORDER = ["derive", "table2", "table3", "table4", "fig2", "fig5", "exponents", "stability",
+ALL_ORDER = ["derive", "table2", "table3", "table4", "ize-levels", "ize-skinny2", "fig2", "fig5", "exponents", "stability",
              "table1h", "fig1h", "fig2h", "predict", "selector", "havran", "wald-table1", "wald-table3", "wald-table4",
              "wald-fig6", "wald-fig7", "wald-fig8", "wald-lowres",
              "fournier-table1"]

@@ -1,0 +1,82 @@
+"""Issue 17 targets (ize-levels, ize-skinny2, the extended fig5) in --quick mode on small scenes and few
+rays, in-process into a temporary folder: the CSVs hold real values (theory cell counts equal to the
+paper's formulas, non-negative swept penalties, positive paired speed-ups, one plane per scene x kind)."""
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from experiments.run import main
+
+RAYS = "600"
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory, gridcost_cache):
+    import numba
+    threads = numba.get_num_threads()  # the targets time on one thread; the rest of the session keeps its own
+    out = tmp_path_factory.mktemp("ize17")
+    common = ["--quick", "--out", str(out), "--json", "--rays", RAYS]
+    assert main(["ize-levels", *common, "--scenes", "bunny-948,particles-1000"]) == 0
+    assert main(["ize-skinny2", *common]) == 0
+    assert main(["fig5", *common, "--scenes", "bunny-948:compact,capped-cylinder-196:skinny"]) == 0
+    numba.set_num_threads(threads)
+    return out
+
+
+def test_levels_theory_m1_is_the_d_level_rule(out):
+    tab = pd.read_csv(out / "ize-levels" / "levels_summary.csv")
+    assert list(tab.scene) == ["bunny-948", "particles-1000"]
+    for _, r in tab.iterrows():
+        assert r.theory_M1_L3 == round((8 * r.N) ** (3 / 7))      # Eq 16 with L = 3, k = 1, Ti/Ts = 4
+        assert r.theory_M1_L2 == round((8 * r.N) ** (3 / 5))      # Eq 13 (Table 4)
+        assert r.theory_M1_formula_L3 == pytest.approx((8 * r.N) ** (3 / 7), rel=1e-12)
+    assert tab.loc[0, "theory_M1_L3"] == 46 and tab.loc[0, "theory_M1_L2"] == 213   # N = 948
+    for L in (2, 3):
+        for sfx in ("", "_camera"):
+            assert (tab[f"L{L}_penalty_swept_pct{sfx}"] >= 0).all()
+            assert np.isfinite(tab[f"L{L}_penalty_pct{sfx}"]).all()
+            assert (tab[f"L{L}_speedup_vs_one_level{sfx}"] > 0).all()
+            assert (tab[f"L{L}_theory_cells{sfx}"] > tab[f"theory_M1_L{L}"]).all()  # sub-grid cells counted
+    assert np.allclose(tab.L3_over_L2, tab.L3_speedup_vs_one_level / tab.L2_speedup_vs_one_level)
+    rows = pd.read_csv(out / "ize-levels" / "levels.csv")
+    assert set(rows.levels) == {1, 2, 3} and set(rows.ray_kind) == {"random", "camera"}
+    three = rows[rows.levels == 3]
+    assert (three.param_depth_rule == "eq16").all() and (three.anchored_ns_per_ray > 0).all()
+    assert {"commit", "host", "clock"} <= set(rows.columns)
+    text = (out / "ize-levels" / "summary.md").read_text()
+    assert "| bunny-948 (bunny) | 948 | 213, 46 |" in text and "(1%)" in text  # paper's Table 4 penalty beside ours
+    assert "not helpful" in text
+
+
+def test_skinny2_rules_and_paired_speedup(out):
+    tab = pd.read_csv(out / "ize-skinny2" / "skinny2_summary.csv")
+    r = tab.iloc[0]
+    assert r.scene == "capped-cylinder-196" and r.N == 196
+    assert r.skinny_M1_param == 4 * 196                       # Eq 17: M1 = k N Ti/Ts
+    assert r.compact_M1_param == round((8 * 196) ** 0.6)      # Table 4's rule
+    assert r.skinny_cells > r.compact_cells                   # Eq 18: the skinny rule's space is larger
+    for sfx in ("", "_camera"):
+        sp = r[f"skinny_speedup{sfx}"]
+        assert sp > 0 and np.isfinite(sp)
+        # the speed-up is the inverse ratio of the paired medians up to per-round pairing
+        assert sp == pytest.approx(r[f"compact_ns{sfx}"] / r[f"skinny_ns{sfx}"], rel=0.5)
+        lo, hi = (float(x) for x in r[f"skinny_speedup_range{sfx}"].split(".."))
+        assert lo <= sp + 1e-9 and sp <= hi + 1e-9
+    assert r.paper_speedup == 1.2
+    assert "(1.2x)" in (out / "ize-skinny2" / "summary.md").read_text()
+
+
+def test_fig5_one_plane_per_scene_and_kind(out):
+    df = pd.read_csv(out / "fig5" / "fig5.csv")
+    planes = df.groupby(["scene", "ray_kind"])
+    assert set(planes.groups) == {(s, k) for s in ("bunny-948", "capped-cylinder-196") for k in ("random", "camera")}
+    for _, g in planes:
+        assert len(g) == 9 and (g.pct_over_best >= 0).all()  # per round over that round's fastest
+        assert (g.pct_over_best_sweep >= 0).all() and g.pct_over_best_sweep.min() == 0
+    assert set(df.model_kind) == {"compact", "skinny"}
+    meta = json.loads((out / "fig5" / "meta.json").read_text())
+    assert meta["kinds"] == ["random", "camera"]
+    assert (out / "paper_figs" / "fig5.png").stat().st_size > 1000
+    assert (out / "paper_figs" / "ize-levels.png").stat().st_size > 1000
