@@ -117,7 +117,8 @@ def test_dask_two_process_cluster_equals_local(tmp_path, monkeypatch):
 
 #: targets of `all` that draw a figure (paper_figs/<target>.png and .pdf)
 FIGURE_TARGETS = ["table2", "speed_accuracy", "table3", "table4", "fig2", "fig5", "exponents", "stability", "table1h", "fig1h", "fig2h",
-                  "wald-table1", "wald-table4", "wald-fig6", "wald-fig7", "fournier-table1"]
+                  "wald-table1", "wald-table3", "wald-table4", "wald-fig6", "wald-fig7", "wald-fig8", "wald-lowres",
+                  "ize-levels", "fournier-table1"]
 
 
 def test_all_quick_into_a_fresh_folder(tmp_path):

@@ -29,7 +29,7 @@ LEVELS = (2, 3)
 #: one-level grids swept from 2N to 32N (table2's best M lies in 4N..32N on these scenes)
 ONE_LEVEL_FACTORS, QUICK_ONE_LEVEL_FACTORS = [2.0, 4.0, 8.0, 16.0, 32.0], [2.0, 8.0, 32.0]
 #: M1 swept from theory / 8 to 8 x theory in half-octaves of sqrt 2 squared (k/2 octaves)
-M1_STEPS, QUICK_M1_STEPS = range(-6, 7, 2), (-4, 0, 4)
+M1_STEPS, QUICK_M1_STEPS = range(-6, 7, 3), (-4, 0, 4)
 #: the paper's word on scattered data (Sec 4, abstract), no number
 SCATTERED = "particles"
 
