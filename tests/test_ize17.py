@@ -62,8 +62,8 @@ def test_skinny2_rules_and_paired_speedup(out):
         assert sp > 0 and np.isfinite(sp)
         # the speed-up is the inverse ratio of the paired medians up to per-round pairing
         assert sp == pytest.approx(r[f"compact_ns{sfx}"] / r[f"skinny_ns{sfx}"], rel=0.5)
-        lo, hi = (float(x) for x in r[f"skinny_speedup_range{sfx}"].split(".."))
-        assert lo <= sp + 1e-9 and sp <= hi + 1e-9
+        lo, hi = (float(x) for x in r[f"skinny_speedup_range{sfx}"].split(".."))  # printed to 2 decimals
+        assert lo - 0.005 <= sp <= hi + 0.005
     assert r.paper_speedup == 1.2
     assert "(1.2x)" in (out / "ize-skinny2" / "summary.md").read_text()
 
