@@ -65,6 +65,7 @@ from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BO
 from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
+from tracer.kdtree_clip import kd_build_clip
 from tracer.memory import check_budget
 
 #: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
@@ -297,16 +298,22 @@ def root_box(scene) -> np.ndarray:
 class KdTree(TreeTraceMixin, Accel):
     """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
     ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
-    round(8 + 1.3 floor(log2 N)))."""
+    round(8 + 1.3 floor(log2 N))), ``clip`` (False: pbrt's build on whole-triangle bounds; True:
+    perfect splits on triangles clipped to the node, :mod:`tracer.kdtree_clip`), ``constants``
+    (None, or a fitted estimator with ``ti_over_tt_``, e.g. :func:`costmodel.kdcost.fit_sah_constants`:
+    sets ``isect_cost`` to it with ``trav_cost`` 1)."""
 
     _kernel = staticmethod(kd_trace)
 
     name = "kdtree"
 
     def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
-                 empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None):
+                 empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None,
+                 clip=False, constants=None):
+        if constants is not None:
+            isect_cost, trav_cost = float(constants.ti_over_tt_), 1.0
         self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
-        self.max_prims, self.max_depth = max_prims, max_depth
+        self.max_prims, self.max_depth, self.clip = max_prims, max_depth, bool(clip)
 
     def build(self, scene):
         n = scene.n
@@ -323,20 +330,22 @@ class KdTree(TreeTraceMixin, Accel):
         tris = scene.tris
         lo = tris.min(axis=1)
         hi = tris.max(axis=1)
-        ev_t, ev_c = sorted_edges(lo, hi)
-        cap = max(16, 8 * n)
-        wt = np.empty((3, cap), np.float32)
-        wc = np.empty((3, cap), np.int32)
-        wt[:, :2 * n] = ev_t
-        wc[:, :2 * n] = ev_c
-        del ev_t, ev_c
         rootb = (np.concatenate([lo.min(axis=0), hi.max(axis=0)]).astype(np.float64) if n
                  else np.zeros(6))
-        (w0, w1, spl, leaf_ids, nleaves, nempty, depth_reached,
-         s_inner, s_leaf, s_tests, root_area) = kd_build(
-            wt, wc, n, rootb, depth, int(self.max_prims), float(self.isect_cost),
-            float(self.trav_cost), float(self.empty_bonus))
-        del wt, wc
+        costs = (int(self.max_prims), float(self.isect_cost), float(self.trav_cost), float(self.empty_bonus))
+        if self.clip:
+            built = kd_build_clip(np.ascontiguousarray(tris.reshape(-1, 9)), n, rootb, depth, *costs)
+        else:
+            ev_t, ev_c = sorted_edges(lo, hi)
+            cap = max(16, 8 * n)
+            wt = np.empty((3, cap), np.float32)
+            wc = np.empty((3, cap), np.int32)
+            wt[:, :2 * n] = ev_t
+            wc[:, :2 * n] = ev_c
+            del ev_t, ev_c
+            built = kd_build(wt, wc, n, rootb, depth, *costs)
+            del wt, wc
+        (w0, w1, spl, leaf_ids, nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area) = built
         inner = (w0 & 3) != LEAF
         w1 = np.where(inner, spl.view(np.int32), w1).astype(np.int32)
         # single-triangle leaves hold the triangle's index itself (no refs-array indirection)
@@ -377,5 +386,5 @@ class KdTree(TreeTraceMixin, Accel):
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
-                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
+                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims, "clip": self.clip},
         }
