@@ -50,7 +50,7 @@ def test_clip_build_matches_oracle_on_every_kind(name, setting):
         occ = kd.occluded(r.origins, r.directions, tmax=np.where(np.isfinite(ref.t), ref.t * 1.001, 1.0))
         assert np.all(occ[ref.tri_id >= 0])
     st = kd.stats()
-    assert st["params"]["clip"] is True and st["depth"] <= st["max_depth"]
+    assert st["clip"] is True and st["depth"] <= st["max_depth"]
     # every triangle is referenced by some leaf
     assert set(np.unique(kd.tri_ids_).tolist()) | set(_inline_ids(kd)) >= set(range(scene(name).n))
 

@@ -18,6 +18,9 @@ node: O(N log^2 N), same trees). Per node, exactly as pbrt-v2:
   go above (straddlers, and triangles lying in the plane, go to one or both sides so that every
   triangle is on each side it touches). Triangles are not clipped: edges are their full bounds.
 
+``clip=True`` builds with perfect splits on triangles clipped to each node instead
+(:mod:`tracer.kdtree_clip`, Wald & Havran 2006); same node layout and traversal.
+
 Layout: pbrt's depth-first order with the below child at ``i + 1``, minus the empty leaves (a
 third of pbrt's leaves; they are counted as visited, not stored). ``nodes_`` (stored nodes, 2)
 int32: interior ``[axis | flag << 2 | child << 4, split (float32 bits)]`` with flag 0: below at
@@ -298,7 +301,8 @@ def root_box(scene) -> np.ndarray:
 class KdTree(TreeTraceMixin, Accel):
     """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
     ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
-    round(8 + 1.3 floor(log2 N))), ``clip`` (False: pbrt's build on whole-triangle bounds; True:
+    round(8 + 1.3 floor(log2 N))), ``extra_depth`` (0: added to pbrt's max depth; the clip build spends
+    levels on empty cut-offs around re-clipped triangles, 2 more levels pay there), ``clip`` (False: pbrt's build on whole-triangle bounds; True:
     perfect splits on triangles clipped to the node, :mod:`tracer.kdtree_clip`), ``constants``
     (None, or a fitted estimator with ``ti_over_tt_``, e.g. :func:`costmodel.kdcost.fit_sah_constants`:
     sets ``isect_cost`` to it with ``trav_cost`` 1)."""
@@ -309,11 +313,12 @@ class KdTree(TreeTraceMixin, Accel):
 
     def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
                  empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None,
-                 clip=False, constants=None):
+                 extra_depth=0, clip=False, constants=None):
         if constants is not None:
             isect_cost, trav_cost = float(constants.ti_over_tt_), 1.0
         self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
         self.max_prims, self.max_depth, self.clip = max_prims, max_depth, bool(clip)
+        self.extra_depth = int(extra_depth)
 
     def build(self, scene):
         n = scene.n
@@ -321,7 +326,7 @@ class KdTree(TreeTraceMixin, Accel):
             raise GridcostError(f"{n:,} triangles exceed the kd-tree's 29-bit index range")
         if int(self.max_prims) < 0:
             raise GridcostError(f"kd-tree max_prims must be >= 0, got {self.max_prims}")
-        depth = pbrt_max_depth(n) if self.max_depth is None else int(self.max_depth)
+        depth = (pbrt_max_depth(n) + self.extra_depth) if self.max_depth is None else int(self.max_depth)
         if depth < 0 or depth > 200:
             raise GridcostError(f"kd-tree max_depth must be in [0, 200], got {depth}")
         # edges (3 x 2N x 8 B) x ~4 for the work area, plus about 3 refs per triangle
@@ -386,5 +391,6 @@ class KdTree(TreeTraceMixin, Accel):
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
-                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims, "clip": self.clip},
+                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
+            "clip": self.clip, "extra_depth": self.extra_depth,
         }
