@@ -18,7 +18,8 @@ from tracer.scene import Scene, load_scene
 
 SCENES = ("bunny-948", "cornell", "particles-2000")
 #: the clip build with pbrt's constants, and with a small isect:trav (as fitted) and a deeper budget
-SETTINGS = ({"clip": True}, {"clip": True, "isect_cost": 4.0, "max_depth": 40})
+SETTINGS = ({"clip": True}, {"clip": True, "isect_cost": 4.0, "max_depth": 40},
+            {"clip": True, "extra_depth": 2, "leaf_order": True})
 NRAYS = 2000
 
 
@@ -53,6 +54,19 @@ def test_clip_build_matches_oracle_on_every_kind(name, setting):
     assert st["clip"] is True and st["depth"] <= st["max_depth"]
     # every triangle is referenced by some leaf
     assert set(np.unique(kd.tri_ids_).tolist()) | set(_inline_ids(kd)) >= set(range(scene(name).n))
+
+
+def test_leaf_order_returns_scene_ids():
+    """Triangles stored in leaf order: the same hits (scene ids) as the scene-order tree, pbrt build."""
+    s = scene("bunny-948")
+    r, (ref, ties) = rays_and_oracle("bunny-948", "random")
+    a, b = build(s, "kdtree"), build(s, "kdtree", leaf_order=True)
+    ha, _ = a.intersect(r.origins, r.directions)
+    hb, _ = b.intersect(r.origins, r.directions)
+    assert np.array_equal(ha.tri_id, hb.tri_id) and np.array_equal(ha.t, hb.t)
+    assert not np.array_equal(b.tri_verts_, a.tri_verts_)
+    assert np.array_equal(np.sort(b.tri_order_[:-1]), np.arange(s.n)) and b.tri_order_[-1] == -1
+    assert np.array_equal(b.tri_verts_, s.tris.reshape(-1, 9)[b.tri_order_[:-1]])
 
 
 def _inline_ids(kd):

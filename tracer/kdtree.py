@@ -30,6 +30,10 @@ one-triangle leaf (most leaves: max_prims = 1), else the offset of the leaf's re
 ``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's triangle
 indices in leaf order and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
 ref (9+ refs per triangle at max_prims = 1 would not fit in L2 where the scene's triangles do).
+With ``leaf_order=True`` the triangles are stored in the order the leaves first reference them
+(:func:`leaf_first_order`), so the triangles of neighbouring leaves share cache lines; the kernel
+then returns stored indices and ``_trace`` maps them back to the scene's through ``tri_order_``
+(8-16 % less time per random ray on bunny-69k / dragon-202k, paired, one thread).
 
 Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
 per block of BLOCK rays); a popped node whose t-range starts after the closest hit is skipped
@@ -298,6 +302,26 @@ def root_box(scene) -> np.ndarray:
     return np.concatenate([lo - pad, hi + pad])
 
 
+def leaf_first_order(nodes: np.ndarray, tri_ids: np.ndarray, n: int) -> np.ndarray:
+    """The scene's triangle indices in the order the stored leaves (depth-first) first reference
+    them, then any never referenced: ``perm[new] = old``."""
+    w = nodes[:, 0]
+    lf = np.flatnonzero((w & 3) == LEAF)
+    cnt = (w[lf] >> 2).astype(np.int64)
+    x = nodes[lf, 1].astype(np.int64)
+    rep = np.repeat(np.arange(len(lf)), cnt)
+    off = np.arange(len(rep)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    xr = x[rep]
+    multi = cnt[rep] > 1
+    seq = xr.copy()
+    if len(tri_ids):
+        seq[multi] = tri_ids[xr[multi] + off[multi]]
+    _, first = np.unique(seq, return_index=True)
+    seen = seq[np.sort(first)]
+    rest = np.setdiff1d(np.arange(n), seen, assume_unique=True)
+    return np.concatenate([seen, rest]).astype(np.int64)
+
+
 class KdTree(TreeTraceMixin, Accel):
     """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
     ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
@@ -313,12 +337,12 @@ class KdTree(TreeTraceMixin, Accel):
 
     def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
                  empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None,
-                 extra_depth=0, clip=False, constants=None):
+                 extra_depth=0, clip=False, constants=None, leaf_order=False):
         if constants is not None:
             isect_cost, trav_cost = float(constants.ti_over_tt_), 1.0
         self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
         self.max_prims, self.max_depth, self.clip = max_prims, max_depth, bool(clip)
-        self.extra_depth = int(extra_depth)
+        self.extra_depth, self.leaf_order = int(extra_depth), bool(leaf_order)
 
     def build(self, scene):
         n = scene.n
@@ -362,8 +386,19 @@ class KdTree(TreeTraceMixin, Accel):
         self.nodes_ = nodes
         self.nodes_f_ = nodes.view(np.float32)
         self.logical_nodes_ = len(w0)
+        # vertices not copied per reference (9 refs per triangle would not fit L2): in scene order,
+        # or in leaf order with the map back to the scene's indices (-1 stays -1)
+        self.tri_order_ = None
+        if self.leaf_order and n:
+            perm = leaf_first_order(nodes, leaf_ids, n)
+            inv = np.empty(n, np.int32)
+            inv[perm] = np.arange(n, dtype=np.int32)
+            one = ((nodes[:, 0] & 3) == LEAF) & ((nodes[:, 0] >> 2) == 1)
+            nodes[one, 1] = inv[nodes[one, 1]]
+            leaf_ids = inv[leaf_ids]
+            tris = tris[perm]
+            self.tri_order_ = np.append(perm, -1).astype(np.int32)
         self.tri_ids_ = leaf_ids
-        # vertices in scene order (not copied per reference: 9 refs per triangle would not fit L2)
         self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9))
         self.box_ = root_box(scene) if n else np.zeros(6)
         self.build_seconds_ = time.perf_counter() - t_start
@@ -374,6 +409,12 @@ class KdTree(TreeTraceMixin, Accel):
         self.sah_ = {"exp_inner": s_inner / ra, "exp_leaves": s_leaf / ra, "exp_tests": s_tests / ra}
         self.scene_name_ = scene.name
         return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        out_t, out_id, cnt = super()._trace(o, d, tmin, tmax, anyhit, count)
+        if self.tri_order_ is not None:  # stored (leaf-order) indices -> the scene's; -1 -> -1
+            out_id = self.tri_order_[out_id]
+        return out_t, out_id, cnt
 
     def stats(self) -> dict:
         nn = self.logical_nodes_
@@ -388,9 +429,10 @@ class KdTree(TreeTraceMixin, Accel):
             # Havran-style expectations for a ray meeting the root box (surface-area ratios)
             "exp_inner": e["exp_inner"], "exp_leaves": e["exp_leaves"], "exp_tests": e["exp_tests"],
             "sah_cost": self.trav_cost * e["exp_inner"] + self.isect_cost * e["exp_tests"],
-            "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes),
+            "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
+                                + (0 if self.tri_order_ is None else self.tri_order_.nbytes)),
             "build_s": self.build_seconds_,
             "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
                        "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
-            "clip": self.clip, "extra_depth": self.extra_depth,
+            "clip": self.clip, "extra_depth": self.extra_depth, "leaf_order": self.leaf_order,
         }
