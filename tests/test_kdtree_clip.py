@@ -27,6 +27,13 @@ NRAYS = 2000
 def scene(name: str) -> Scene:
     if name == "bunny-948-far":  # unit bunny 1e5 from the origin: float32 rays in split planes
         return transformed_scene(load_scene("bunny-948"), 1.0, 1e5)
+    if name == "soup":  # random triangles with segments, points, duplicates and a planar patch
+        t = np.random.default_rng(1).uniform(0, 1, (300, 3, 3)).astype(np.float32)
+        t[:20, 2] = t[:20, 1]
+        t[20:40] = t[40:60]
+        t[60:80, :, 2] = 0.5
+        t[80:90] = t[80:90, [0]]
+        return Scene(t, "soup")
     return load_scene(name)
 
 
@@ -37,7 +44,7 @@ def rays_and_oracle(name: str, kind: str):
 
 
 @pytest.mark.parametrize("setting", range(len(SETTINGS)))
-@pytest.mark.parametrize("name", SCENES + ("bunny-948-far",))
+@pytest.mark.parametrize("name", SCENES + ("bunny-948-far", "soup"))
 def test_clip_build_matches_oracle_on_every_kind(name, setting):
     kd = build(scene(name), "kdtree", **SETTINGS[setting])
     for kind in KINDS:
