@@ -1,0 +1,106 @@
+"""The kd-tree's SAH constants measured on this machine: the kd-tree's time per ray fitted to its
+own counters, and the fitted ratio used as the build's isect:trav constant ("the cost model
+calibrating the structure it predicts").
+
+* :func:`kd_time_per_ray` — the model, T/ray = c_node nodes + c_leaf leaves + c_test tests + c_0.
+* :class:`KdCostFit` — non-negative least squares of that model (scikit-learn style), with
+  ``ti_over_tt_`` = c_test / c_node, the SAH's C_isect / C_trav.
+* :func:`measure_kd_points` — per (scene, ray kind, build setting): mean counters per ray and the
+  median time per ray of the non-counting kernel (warm-up first, ``repeats`` timed runs).
+* :func:`fit_sah_constants` — both together: the fitted estimator for ``build(scene, "kdtree",
+  constants=fit)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import nnls
+
+from costmodel.fit import _metrics
+
+#: build settings measured by default: trees of different shapes (depth, clipping) so the node,
+#: leaf and test counts vary independently enough to separate their costs
+DEFAULT_SETTINGS = ({}, {"max_depth": 16}, {"clip": True}, {"clip": True, "max_depth": 40},
+                    {"isect_cost": 5.0, "clip": True, "max_depth": 40})
+COLUMNS = ("nodes", "leaves", "tests")
+
+
+def kd_time_per_ray(nodes, leaves, tests, c_node, c_leaf, c_test, c_0=0.0):
+    """Kd-tree traversal cost per ray: T = c_node * nodes + c_leaf * leaves + c_test * tests + c_0,
+    nodes / leaves / tests the per-ray means of the ``nodes``, ``steps`` and ``tests`` counters."""
+    return (c_node * np.asarray(nodes, float) + c_leaf * np.asarray(leaves, float)
+            + c_test * np.asarray(tests, float) + c_0)
+
+
+class KdCostFit:
+    """Fit :func:`kd_time_per_ray` (non-negative constants; relative residuals, weights 1/T) to
+    points X = (nodes, leaves, tests) per ray, y = seconds (any unit) per ray."""
+
+    def __init__(self, intercept: bool = True):
+        self.intercept = intercept
+
+    def _design(self, X):
+        X = np.asarray(X, float).reshape(-1, 3)
+        return np.column_stack([X, np.ones(len(X)) if self.intercept else np.zeros(len(X))])
+
+    def fit(self, X, y):
+        y = np.asarray(y, float)
+        A = self._design(X)
+        w = 1.0 / y
+        coef, _ = nnls(A * w[:, None], y * w)
+        self.c_node_, self.c_leaf_, self.c_test_, self.c_0_ = (float(c) for c in coef)
+        self.coef_ = coef
+        Aw = A[:, :3] * w[:, None]
+        self.cond_ = float(np.linalg.cond(Aw / np.linalg.norm(Aw, axis=0)))
+        self.metrics_ = _metrics(y, A @ coef)
+        self.n_points_ = len(y)
+        return self
+
+    @property
+    def ti_over_tt_(self) -> float:
+        """C_isect / C_trav of the SAH: the fitted cost of a triangle test over that of a node visit."""
+        return self.c_test_ / self.c_node_ if self.c_node_ > 0 else float("inf")
+
+    def predict(self, X):
+        return self._design(X) @ self.coef_
+
+    def summary(self) -> dict:
+        return {"c_node": self.c_node_, "c_leaf": self.c_leaf_, "c_test": self.c_test_, "c_0": self.c_0_,
+                "ti_over_tt": self.ti_over_tt_, "cond": self.cond_, "points": self.n_points_, **self.metrics_}
+
+
+def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTINGS, n_rays: int = 50_000,
+                      repeats: int = 5, seed: int = 0, clock=None) -> list[dict]:
+    """One point per (scene, ray kind, kd-tree build setting): per-ray means of the counters and the
+    median seconds per ray of the non-counting kernel (:func:`tracer.timing.time_call`, warm-up
+    first; ``clock`` as :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded
+    machine). ``scenes`` are Scene objects or registry names. Run it single-threaded."""
+    from tracer.accel import build
+    from tracer.rays import make_rays
+    from tracer.scene import load_scene
+    from tracer.timing import time_call
+    out = []
+    for sc in scenes:
+        scene = load_scene(sc) if isinstance(sc, str) else sc
+        rays = {k: make_rays(scene, k, n_rays, seed=seed) for k in kinds}
+        for params in settings:
+            kd = build(scene, "kdtree", **params)
+            for kind, r in rays.items():
+                _, cnt = kd.intersect(r.origins, r.directions, counters=True)
+                tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats, clock=clock)
+                m = cnt.mean()
+                out.append({"scene": scene.name, "kind": kind, "params": dict(params), "rays": r.n,
+                            "nodes": m["nodes"], "leaves": m["steps"], "tests": m["tests"],
+                            "s_per_ray": tm.median / r.n, "spread": tm.spread})
+    return out
+
+
+def fit_sah_constants(scenes=("bunny-16k", "dragon-48k", "bunny-69k"), points=None, **measure) -> KdCostFit:
+    """Measure (or take ``points`` from :func:`measure_kd_points`) and fit :class:`KdCostFit`; the
+    estimator's ``ti_over_tt_`` is the isect:trav constant for ``build(scene, "kdtree", constants=...)``.
+    The measured points are kept in ``points_``."""
+    pts = points if points is not None else measure_kd_points(scenes, **measure)
+    X = np.array([[p[c] for c in COLUMNS] for p in pts])
+    y = np.array([p["s_per_ray"] for p in pts]) * 1e9  # ns per ray
+    fit = KdCostFit().fit(X, y)
+    fit.points_ = pts
+    return fit
