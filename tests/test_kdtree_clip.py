@@ -67,7 +67,7 @@ def test_leaf_order_returns_scene_ids():
     """Triangles stored in leaf order: the same hits (scene ids) as the scene-order tree, pbrt build."""
     s = scene("bunny-948")
     r, (ref, ties) = rays_and_oracle("bunny-948", "random")
-    a, b = build(s, "kdtree"), build(s, "kdtree", leaf_order=True)
+    a, b = build(s, "kdtree", leaf_order=False), build(s, "kdtree", leaf_order=True)
     ha, _ = a.intersect(r.origins, r.directions)
     hb, _ = b.intersect(r.origins, r.directions)
     assert np.array_equal(ha.tri_id, hb.tri_id) and np.array_equal(ha.t, hb.t)

@@ -78,7 +78,7 @@ def test_occupied_counter(structure, params):
     assert occ.sum() > 0 and (occ < steps).any()
 
 
-@pytest.mark.parametrize("structure", ["grid", "nested", "bvh", "bvh4"])
+@pytest.mark.parametrize("structure", ["grid", "nested", "kdtree", "bvh", "bvh4"])
 def test_working_set_by_kind_adds_up(structure):
     st = build(load_scene("bunny-948"), structure).stats()
     ws = st["working_set"]

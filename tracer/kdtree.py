@@ -30,7 +30,7 @@ one-triangle leaf (most leaves: max_prims = 1), else the offset of the leaf's re
 ``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's triangle
 indices in leaf order and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
 ref (9+ refs per triangle at max_prims = 1 would not fit in L2 where the scene's triangles do).
-With ``leaf_order=True`` the triangles are stored in the order the leaves first reference them
+By default (``leaf_order=True``; False keeps scene order) the triangles are stored in the order the leaves first reference them
 (:func:`leaf_first_order`), so the triangles of neighbouring leaves share cache lines; the kernel
 then returns stored indices and ``_trace`` maps them back to the scene's through ``tri_order_``
 (8-16 % less time per random ray on bunny-69k / dragon-202k, paired, one thread).
@@ -73,7 +73,7 @@ from tracer.errors import GridcostError
 from tracer.geometry import INF, ray_triangle
 from tracer.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.kdtree_clip import kd_build_clip
-from tracer.memory import check_budget
+from tracer.memory import check_budget, working_set
 
 #: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
 #: rounding of plane distances and of ray_triangle's edge test (hits on a triangle's very edge)
@@ -337,7 +337,7 @@ class KdTree(TreeTraceMixin, Accel):
 
     def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
                  empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None,
-                 extra_depth=0, clip=False, constants=None, leaf_order=False):
+                 extra_depth=0, clip=False, constants=None, leaf_order=True):
         if constants is not None:
             isect_cost, trav_cost = float(constants.ti_over_tt_), 1.0
         self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
@@ -431,6 +431,9 @@ class KdTree(TreeTraceMixin, Accel):
             "sah_cost": self.trav_cost * e["exp_inner"] + self.isect_cost * e["exp_tests"],
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
                                 + (0 if self.tri_order_ is None else self.tri_order_.nbytes)),
+            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes
+                                       + (0 if self.tri_order_ is None else self.tri_order_.nbytes),
+                                       self.tri_verts_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
                        "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
