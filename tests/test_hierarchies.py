@@ -116,12 +116,12 @@ def test_kdtree_tests_far_below_n():
 
 
 def test_kdtree_follows_pbrt_parameters():
-    a = accel("kdtree", "bunny-948")
+    a = build(scene("bunny-948"), "kdtree", leaf_order=False)
     s = a.stats()
     # pbrt-v2: maxDepth = round(8 + 1.3 * Log2Int(948)) = round(8 + 1.3 * 9) = 20
     assert s["max_depth"] == 20 and s["depth"] <= 20
     assert s["params"] == {"isect_cost": 80.0, "trav_cost": 1.0, "empty_bonus": 0.5, "max_prims": 1}
-    # every triangle is referenced; the vertices are the scene's, in scene order (leaves index them)
+    # every triangle is referenced; with leaf_order=False the vertices are the scene's, in scene order
     assert set(np.unique(a.tri_ids_)) == set(range(scene("bunny-948").n))
     assert np.array_equal(a.tri_verts_, scene("bunny-948").tris.reshape(-1, 9))
     assert s["leaves"] == s["interior"] + 1 and s["nodes"] == s["leaves"] + s["interior"]
