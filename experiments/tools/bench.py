@@ -34,10 +34,8 @@ VARIANTS = {
     # perfect splits on clipped triangles (Wald & Havran 2006), pbrt's constants 80:1:0.5
     "kdtree-clip": ("kdtree", {"clip": True}),
     "kdtree-clip-d2": ("kdtree", {"clip": True, "extra_depth": 2}),
-    # isect:trav = c_test / c_node = 1.007 from costmodel.kdcost.fit_sah_constants on this machine
-    # (bunny-16k, dragon-48k, bunny-69k; random + camera rays; 5 build settings; thread clock)
-    "kdtree-fit": ("kdtree", {"isect_cost": 1.007}),
-    "kdtree-clip-fit": ("kdtree", {"clip": True, "isect_cost": 1.007, "extra_depth": 2}),
+    # (SAH constants fitted on this machine: build(scene, "kdtree", constants=costmodel.kdcost.fit_sah_constants(...))
+    # in the same run; no fitted number is typed in here)
     # clip-d2 with the triangles stored in leaf order (neighbouring leaves' triangles share lines)
     "kdtree-fast": ("kdtree", {"clip": True, "extra_depth": 2, "leaf_order": True}),
     "bvh": ("bvh", {}),
