@@ -204,15 +204,21 @@ def teapot_in_stadium(mesh: Callable[[str], Scene | None]) -> np.ndarray:
 
 
 def _teapot_in_stadium(mesh):
-    """(triangles, number of teapot triangles (the first ones), view ``(centre, radius)``).
+    """(triangles, number of teapot triangles (the first ones), view): :func:`in_stadium` around
+    ``mesh("teapot")``, or around a sphere when that is None."""
+    pot = mesh(TEAPOT)
+    return in_stadium(pot.tris if pot is not None else sphere(6000))
 
-    The view is a close-up of the teapot: centred on its box, radius half the box's smallest extent
+
+def in_stadium(pot: np.ndarray) -> tuple[np.ndarray, int, tuple]:
+    """(triangles, number of object triangles (the first ones), view ``(centre, radius)``) of the
+    object ``pot`` (m, 3, 3) inside a stadium: a subdivided box 200x the object's size.
+
+    The view is a close-up of the object: centred on its box, radius half the box's smallest extent
     (the pot's height), so the pot fills the camera's frame (spout and handle may be cut off). Its
     full bounding sphere (half the box diagonal) would leave the pot about 15 % of the pixels from the
     default camera direction, the rest of the image being stadium floor and walls; this view gives
     about 85 % (a sphere stand-in: pi / 4)."""
-    pot = mesh(TEAPOT)
-    pot = pot.tris if pot is not None else sphere(6000)
     lo = pot.reshape(-1, 3).min(0)
     hi = pot.reshape(-1, 3).max(0)
     size = float((hi - lo).max())

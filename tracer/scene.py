@@ -15,6 +15,9 @@ a ``MANIFEST.tsv`` name    a mesh listed in the models directory's       :mod:`t
 ``sphereflake-2``,         Haines' Standard Procedural Databases         :mod:`tracer.spd`
 ``tetra-5``                (``sphereflake``, ``tetra``, ``gears``,
                            ``tree``)
+``fandisk-x4``,            derived from another scene by name:           :mod:`tracer.derived`
+``teapot-x4-in-stadium``,  subdivided, in a stadium, k copies in a
+``array-24-60-bunny-69k``  lattice
 ``path/to/mesh.ply``       any mesh file (OBJ, PLY, OFF, STL, GLB/GLTF,  :mod:`tracer.meshfile`
                            optionally .gz/.xz)
 =========================  ===========================================  ==========================
@@ -30,7 +33,7 @@ import os
 import re
 from pathlib import Path
 
-from tracer import procedural, registry, spd
+from tracer import derived, procedural, registry, spd
 from tracer.errors import GridcostError
 from tracer.meshfile import FORMATS, _atomic_savez, _decode_strips, load_mesh  # noqa: F401 (re-exports)
 from tracer.meshfile import cache_root as cache_dir  # noqa: F401 (re-export)
@@ -118,6 +121,8 @@ def load_scene(name_or_path: str) -> Scene:
     is replaced by a labelled stand-in (see :func:`tracer.registry.load`; ``GRIDCOST_NO_STAND_INS=1``
     makes that an error)."""
     spec = str(name_or_path)
+    if derived.matches(spec) and not Path(spec).suffix:
+        return derived.make(spec, load_scene)
     if procedural.matches(spec):
         return procedural.make(spec, mesh=_named_mesh)
     if spd.matches(spec):

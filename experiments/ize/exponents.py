@@ -5,7 +5,6 @@ paper reports in its conclusion (7/9 compact, 4/3 skinny)."""
 from __future__ import annotations
 
 import json
-import re
 import sys
 import time
 from pathlib import Path
@@ -36,38 +35,6 @@ FAMILIES = {
     "teapot in stadium": (["teapot-in-stadium", "teapot-x4-in-stadium", "teapot-x16-in-stadium"], [],
                           "compact", 1.0, None),
 }
-
-
-def subdivide(tris: np.ndarray, times: int = 1) -> np.ndarray:
-    """Midpoint subdivision, each triangle into 4 (``times`` times): N -> 4^times N with the same
-    surface, so a family keeps its shape and its spread of triangle sizes while N grows."""
-    t = np.asarray(tris, np.float64)
-    for _ in range(times):
-        a, b, c = t[:, 0], t[:, 1], t[:, 2]
-        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
-        t = np.stack([np.stack(v, 1) for v in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))], 1).reshape(-1, 3, 3)
-    return t.astype(np.float32)
-
-
-#: scenes of the families above that the scene registry does not name: ``<mesh>-x4`` / ``-x16`` =
-#: the mesh subdivided once / twice (:func:`subdivide`); ``teapot-x<k>-in-stadium`` = the stadium of
-#: :func:`tracer.procedural.teapot_in_stadium` around the subdivided teapot
-DERIVED = re.compile(r"^(?P<mesh>[a-z0-9-]+?)-x(?P<k>4|16)(?P<stadium>-in-stadium)?$")
-
-
-def load_family_scene(name: str):
-    """A scene of :data:`FAMILIES` by name: the registry's (:func:`tracer.scene.load_scene`), or a
-    :data:`DERIVED` one built here from the registry's meshes."""
-    from tracer.procedural import teapot_in_stadium
-    from tracer.scenetype import Scene
-    m = DERIVED.match(name)
-    if m is None:
-        return load_scene(name)
-    base = load_scene(m["mesh"])
-    fine = Scene(subdivide(base.tris, {"4": 1, "16": 2}[m["k"]]), name, "derived")
-    if not m["stadium"]:
-        return fine
-    return Scene(teapot_in_stadium(lambda _: fine), name, "derived")
 
 
 #: two-level family (Ize Eq 13, M1 ∝ N^(3/5)): tiny triangles on a sphere, points on a surface as
@@ -149,7 +116,7 @@ def main(ctx, args) -> int:
         repeats = args.repeats or (3 if args.quick else 5)
         Ns, Ms, Mw = [], [], []
         for name in names:
-            scene = load_family_scene(name)
+            scene = load_scene(name)
             m, df = best_m(scene, kind, n_rays, repeats, store, args.quick, args.seed)
             Ns.append(scene.n)
             Ms.append(m)

@@ -91,7 +91,7 @@ def _points(ctx, args) -> pd.DataFrame:
 
 
 def main(ctx, args) -> int:
-    from experiments.ize.exponents import load_family_scene
+    from tracer.scene import load_scene
     from tracer.timing import set_threads
     started = time.time()
     threads = set_threads(args.threads or 1)
@@ -104,7 +104,7 @@ def main(ctx, args) -> int:
     for (family, name), k in pts.groupby(["family", "scene"], sort=False):
         k = k.drop_duplicates("cells")
         best = float(k.anchored_ns_per_ray.min())
-        scene = load_family_scene(name)
+        scene = load_scene(name)
         best_M = float(k.loc[k.anchored_ns_per_ray.idxmin()].cells)
         base = {"family": family, "scene": name, "N": scene.n, "best_M": best_M, "rays": int(k.rays.iloc[0]),
                 "sweep_spread_pct": 100 * float(k.spread.median())}
