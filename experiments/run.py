@@ -53,7 +53,7 @@ TARGETS: dict[str, tuple[str, str]] = {
 ALL_ORDER = ["derive", "table2", "table3", "table4", "ize-levels", "ize-skinny2", "fig2", "fig5", "exponents", "stability",
              "table1h", "fig1h", "fig2h", "predict", "selector", "havran", "wald-table1", "wald-table3", "wald-table4",
              "wald-fig6", "wald-fig7", "wald-fig8", "wald-lowres",
-             "fournier-table1"]
+             "fournier-table1", "advise-check"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
