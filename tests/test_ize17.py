@@ -75,6 +75,7 @@ def test_fig5_one_plane_per_scene_and_kind(out):
     for _, g in planes:
         assert len(g) == 9 and (g.pct_over_best >= 0).all()  # per round over that round's fastest
         assert (g.pct_over_best_sweep >= 0).all() and g.pct_over_best_sweep.min() == 0
+        assert g.memory_pick.sum() == 1  # one memory-aware point per plane
     assert set(df.model_kind) == {"compact", "skinny"}
     meta = json.loads((out / "fig5" / "meta.json").read_text())
     assert meta["kinds"] == ["random", "camera"]
