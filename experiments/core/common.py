@@ -13,6 +13,25 @@ def add_scene_args(p, default_scene: str | None = None) -> None:
     g.add_argument("--scene", default=default_scene, help="named scene (see tracer.scene_names())")
 
 
+def add_ray_args(p, scenes: str, rays: str, repeats: str | None = None) -> None:
+    """``--scenes``, ``--rays``, ``--repeats`` (None: the target's quick or full default) and ``--seed``
+    of a target that measures on rays of several kinds."""
+    p.add_argument("--scenes", default=None, help=scenes)
+    p.add_argument("--rays", type=int, default=None, help=rays)
+    p.add_argument("--repeats", type=int, default=None, help=repeats)
+    p.add_argument("--seed", type=int, default=0)
+
+
+def add_image_args(p, scenes: str, side: str | None = None, repeats: str | None = None) -> None:
+    """``--scenes``, then ``--side`` (image side in pixels) and ``--repeats`` (rounds) when their help is
+    given, of a target that traces camera images."""
+    p.add_argument("--scenes", default=None, help=scenes)
+    if side is not None:
+        p.add_argument("--side", type=int, default=None, help=side)
+    if repeats is not None:
+        p.add_argument("--repeats", type=int, default=None, help=repeats)
+
+
 def scene_from_args(args):
     from tracer.scene import load_mesh, load_scene
     return load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
@@ -38,6 +57,21 @@ def parse_params(items) -> dict:
         else:
             out[k] = v
     return out
+
+
+def missing(v) -> bool:
+    """None or a float NaN (a cell a summary prints as a dash)."""
+    return v is None or (isinstance(v, float) and v != v)
+
+
+def dash(v, spec: str = "{}") -> str:
+    """``spec.format(v)``, or "–" when ``v`` is :func:`missing`."""
+    return "–" if missing(v) else spec.format(v)
+
+
+def dash_int(v) -> str:
+    """``v`` as an integer with thousands separators, or "–" when it is :func:`missing`."""
+    return "–" if missing(v) else f"{int(v):,}"
 
 
 def emit_json(obj) -> None:

@@ -47,3 +47,26 @@ def log_scale(ax, axis: str, values) -> bool:
     ax.text(0.5, 0.5, "no positive values to draw on a log scale", transform=ax.transAxes, ha="center",
             va="center", fontsize=8, color="gray")
     return False
+
+
+def subplots(*args, **kw):
+    """``matplotlib.pyplot.subplots(*args, **kw)`` on the non-interactive Agg backend: (fig, axes)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt.subplots(*args, **kw)
+
+
+def finish_log_panels(ctx, fig, axes, titles, xlabel: str, ylabel: str, name: str, label_size=None) -> list[Path]:
+    """Label the row of panels ``axes[0]`` (one per title) on a log x axis: title (size 8), x label
+    and small ticks on each, the y label on the first, the legend on the last (``label_size``: the
+    labels' font size, None for matplotlib's); then save ``fig`` as ``name`` (``ctx.finish_figure``)."""
+    kw = {} if label_size is None else {"fontsize": label_size}
+    for ax, title in zip(axes[0], titles):
+        ax.set_xscale("log")
+        ax.set_title(title, fontsize=8)
+        ax.set_xlabel(xlabel, **kw)
+        ax.tick_params(labelsize=7)
+    axes[0][0].set_ylabel(ylabel, **kw)
+    axes[0][-1].legend(fontsize=6)
+    return ctx.finish_figure(fig, name)

@@ -6,21 +6,16 @@ helpful"). Per level count L the theory's M1 is re-timed side by side with the f
 the same L (penalty) and the best swept one-level grid (speed-up), as ``table4`` does."""
 from __future__ import annotations
 
-import time
 from functools import lru_cache
-from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
+from experiments.core.common import add_ray_args, dash
+from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import grid_cells, paired_penalties, penalty_pct, penalty_range, sweep
+from experiments.core.target import begin, kind_rays, run_quiet
 from experiments.ize.table4 import PAPER as PAPER4
 from experiments.ize.table4 import PAPER_SPEEDUP
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 SCENES = list(PAPER4) + ["particles-100k"]
 QUICK_SCENES = ["bunny-948", "particles-2000"]
@@ -74,11 +69,9 @@ def m1_sweep(n: int, levels: int, quick: bool) -> list[dict]:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: Table 4's five and "
-                                                  "particles-100k; --quick bunny-948, particles-2000)")
-    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 20000; --quick 2000)")
-    p.add_argument("--repeats", type=int, default=None, help="sweep rounds per point (default 5; --quick 3)")
-    p.add_argument("--seed", type=int, default=0)
+    add_ray_args(p, "comma-separated scenes (default: Table 4's five and particles-100k; --quick bunny-948, "
+                    "particles-2000)", "rays per kind (default 20000; --quick 2000)",
+                 "sweep rounds per point (default 5; --quick 3)")
 
 
 def _scene_rows(ctx, scene, rays, store, repeats, quick) -> tuple[list[pd.DataFrame], dict]:
@@ -124,36 +117,19 @@ def _scene_rows(ctx, scene, rays, store, repeats, quick) -> tuple[list[pd.DataFr
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, SCENES)
-    n_rays = args.rays or (2_000 if quick else 20_000)
-    repeats = args.repeats or (3 if quick else 5)
+    tr = begin(ctx, args, "ize-levels", (QUICK_SCENES, SCENES), threads=args.threads or 1, log=log)
+    n_rays, repeats = tr.ray_budget(2_000, 20_000)
     store = ctx.store()
-    out_dir = Path(args.out) / "ize-levels"
     frames, table = [], []
-    for name in names:
-        scene = load_scene(name)
-        rays = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
-        f, row = _scene_rows(ctx, scene, rays, store, repeats, quick)
+    for _, scene in tr.scenes():
+        f, row = _scene_rows(ctx, scene, kind_rays(scene, KINDS, n_rays, args.seed), store, repeats, tr.quick)
         frames += f
         table.append(row)
     df = pd.concat(frames, ignore_index=True)
     tab = pd.DataFrame(table)
-    ctx.write_csv(out_dir / "levels.csv", df)
-    ctx.write_csv(out_dir / "levels_summary.csv", tab)
-    md = _summary(tab, n_rays, repeats, threads, quick)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df, tab)
-    ctx.write_meta(out_dir, "ize-levels", started, threads=threads, rays_per_kind=n_rays, repeats=repeats,
-                   seed=args.seed, scenes=names, quick=quick)
-    log(md)
+    tr.finish(_summary(tab, n_rays, repeats, tr.threads, tr.quick), {"levels.csv": df, "levels_summary.csv": tab},
+              figure=lambda: _figure(ctx, df, tab), rays_per_kind=n_rays, repeats=repeats, seed=args.seed)
     return {"table": tab}
-
-
-def _fmt(v, spec="{:.2f}x") -> str:
-    return "–" if v is None or (isinstance(v, float) and np.isnan(v)) else spec.format(v)
 
 
 def _summary(tab, n_rays, repeats, threads, quick) -> str:
@@ -176,8 +152,8 @@ def _summary(tab, n_rays, repeats, threads, quick) -> str:
              "speed-up L=2 ours (paper) | speed-up L=3 | L3/L2 | camera: penalty L=2, L=3; speed-up L=2, L=3 |",
              "|---|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
-        pp = _fmt(r.paper_L2_penalty_pct, "{:g}%")
-        ps = _fmt(r.paper_L2_speedup, "{:g}x") if r.paper_model != SCATTERED else "not helpful"
+        pp = dash(r.paper_L2_penalty_pct, "{:g}%")
+        ps = dash(r.paper_L2_speedup, "{:g}x") if r.paper_model != SCATTERED else "not helpful"
         lines.append(
             f"| {r.scene} ({r.paper_model}) | {r.N:,} | {r.theory_M1_L2:,}, {r.theory_M1_L3:,} | "
             f"{r.L2_penalty_pct:.1f}% [{r.L2_penalty_range}] ({pp}) | {r.L3_penalty_pct:.1f}% [{r.L3_penalty_range}] | "
@@ -214,10 +190,7 @@ def _reading(tab) -> list[str]:
 
 
 def _figure(ctx, df, tab):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, len(tab), figsize=(3.0 * len(tab), 2.7), squeeze=False)
+    fig, axes = subplots(1, len(tab), figsize=(3.0 * len(tab), 2.7), squeeze=False)
     for ax, (_, r) in zip(axes[0], tab.iterrows()):
         s = df[(df.scene == r.scene) & (df.ray_kind == "random")]
         for L, mk in ((2, "o"), (3, "s")):
@@ -225,15 +198,9 @@ def _figure(ctx, df, tab):
             ax.plot(k.M1, k.anchored_ns_per_ray, mk + "-", ms=3, lw=0.8, label=f"L = {L}")
             ax.axvline(r[f"theory_M1_L{L}"], color="C0" if L == 2 else "C1", ls="--", lw=0.8)
         ax.axhline(s[s.levels == 1].anchored_ns_per_ray.min(), color="k", ls=":", lw=1, label="best one-level")
-        ax.set_xscale("log")
-        ax.set_title(f"{r.scene} (N = {r.N:,})", fontsize=8)
-        ax.set_xlabel("top-level cells M1", fontsize=8)
-        ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("time per random ray (ns)", fontsize=8)
-    axes[0][-1].legend(fontsize=6)
-    ctx.finish_figure(fig, "ize-levels")
+    finish_log_panels(ctx, fig, axes, (f"{r.scene} (N = {r.N:,})" for _, r in tab.iterrows()), "top-level cells M1",
+                      "time per random ray (ns)", "ize-levels", label_size=8)
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

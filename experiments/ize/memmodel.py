@@ -25,6 +25,13 @@ def machine(quick: bool = False, log=None):
     return _MACHINE[quick]
 
 
+def memory_aware_table(df: pd.DataFrame, scenes, kinds, quick: bool = False, log=None) -> dict:
+    """(scene, kind) -> :func:`memory_aware_cells` of every scene of ``scenes`` and kind of ``kinds``
+    (one-level grids), the host's :func:`machine` model loaded first."""
+    mach = machine(quick, log=log)
+    return {(name, kind): memory_aware_cells(df, name, kind, mach) for name in scenes for kind in kinds}
+
+
 def grid_rows(df: pd.DataFrame, kind: str, structure: str = "grid", x: str = "cells") -> pd.DataFrame:
     d = df[(df.ray_kind == kind) & (df.structure == structure)]
     return d.drop_duplicates(["scene", x])

@@ -4,19 +4,12 @@ rule of Table 4 (M1 = (8N)^(3/5), M2 = 8 N2) on the capped cylinders, timed side
 skinny rule renders 1.6x faster on the "1996" and 1.2x faster on the 196 triangle cylinder)."""
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
-import numpy as np
 import pandas as pd
 
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
+from experiments.core.common import add_ray_args, dash
 from experiments.core.sweep import paired_penalties, sweep
+from experiments.core.target import begin, kind_rays, run_quiet
 from experiments.ize.levels import d_level_m1, paper_cells
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 SCENES = ["capped-cylinder-196", "capped-cylinder-3996", "capped-cylinder-19996"]
 QUICK_SCENES = ["capped-cylinder-196"]
@@ -46,11 +39,8 @@ def rules(n: int) -> dict:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the capped cylinders 196, "
-                                                  "3996, 19996; --quick 196)")
-    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 20000; --quick 2000)")
-    p.add_argument("--repeats", type=int, default=None, help="sweep rounds per point (default 5; --quick 3)")
-    p.add_argument("--seed", type=int, default=0)
+    add_ray_args(p, "comma-separated scenes (default: the capped cylinders 196, 3996, 19996; --quick 196)",
+                 "rays per kind (default 20000; --quick 2000)", "sweep rounds per point (default 5; --quick 3)")
 
 
 def skinny_speedup(pp: dict) -> tuple[float, str]:
@@ -65,18 +55,12 @@ def skinny_speedup(pp: dict) -> tuple[float, str]:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, SCENES)
-    n_rays = args.rays or (2_000 if quick else 20_000)
-    repeats = args.repeats or (3 if quick else 5)
+    tr = begin(ctx, args, "ize-skinny2", (QUICK_SCENES, SCENES), threads=args.threads or 1, log=log)
+    n_rays, repeats = tr.ray_budget(2_000, 20_000)
     store = ctx.store()
-    out_dir = Path(args.out) / "ize-skinny2"
     frames, table = [], []
-    for name in names:
-        scene = load_scene(name)
-        rays = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
+    for name, scene in tr.scenes():
+        rays = kind_rays(scene, KINDS, n_rays, args.seed)
         rs = rules(scene.n)
         df = pd.DataFrame(sweep(scene, "nested", list(rs.values()), rays, store, repeats, desc=f"ize-skinny2 {name}"))
         df["rule"] = [r for r in rs for _ in KINDS]
@@ -89,7 +73,7 @@ def run(ctx, args, log=print) -> dict:
                         f"{rule}_memory_mb": r.memory_bytes / 1e6, f"{rule}_build_s": r.build_s})
         for kind in KINDS:
             sfx = "" if kind == "random" else f"_{kind}"
-            pp = paired_penalties(scene, "nested", rs, [], rays[kind], store, quick=quick,
+            pp = paired_penalties(scene, "nested", rs, [], rays[kind], store, quick=tr.quick,
                                   others={"one_level_8N": ONE_LEVEL})
             sp, rng = skinny_speedup(pp)
             k = df[df.ray_kind == kind].set_index("rule")
@@ -101,13 +85,9 @@ def run(ctx, args, log=print) -> dict:
                         f"skinny_steps{sfx}": k.loc["skinny", "steps"], f"compact_steps{sfx}": k.loc["compact", "steps"]})
         table.append(row)
     tab = pd.DataFrame(table)
-    ctx.write_csv(out_dir / "skinny2.csv", pd.concat(frames, ignore_index=True))
-    ctx.write_csv(out_dir / "skinny2_summary.csv", tab)
-    md = _summary(tab, n_rays, repeats, threads)
-    atomic_write(out_dir / "summary.md", md)
-    ctx.write_meta(out_dir, "ize-skinny2", started, threads=threads, rays_per_kind=n_rays, repeats=repeats,
-                   seed=args.seed, scenes=names, quick=quick)
-    log(md)
+    tr.finish(_summary(tab, n_rays, repeats, tr.threads),
+              {"skinny2.csv": pd.concat(frames, ignore_index=True), "skinny2_summary.csv": tab},
+              rays_per_kind=n_rays, repeats=repeats, seed=args.seed)
     return {"table": tab}
 
 
@@ -128,8 +108,7 @@ def _summary(tab, n_rays, repeats, threads) -> str:
              "tests per camera ray skinny, compact |",
              "|---|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
-        paper = "–" if r.paper_speedup is None or (isinstance(r.paper_speedup, float) and np.isnan(r.paper_speedup)) \
-            else f"{r.paper_speedup:g}x{r.paper_mark}"
+        paper = dash(r.paper_speedup, "{:g}x" + r.paper_mark)
         lines.append(
             f"| {r.scene} | {r.N:,} | {r.skinny_M1:,}, {r.compact_M1:,} | {r.skinny_cells:,} / {r.compact_cells:,} "
             f"({r.skinny_memory_mb:.1f} / {r.compact_memory_mb:.1f}) | {r.skinny_speedup_camera:.2f}x "
@@ -149,5 +128,4 @@ def _summary(tab, n_rays, repeats, threads) -> str:
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -8,7 +8,6 @@ rays as a second column. Stand-ins: the dragon at 11K / 871K triangles for the H
 """
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -16,14 +15,13 @@ import pandas as pd
 
 from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
 from experiments.ize import memmodel
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
+from experiments.core.common import add_ray_args, dash, dash_int
+from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import (penalty_range, FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
+from experiments.core.target import begin, kind_rays, run_quiet
 from tracer.constants import IZE_TI_OVER_TS
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import clock_name, set_threads
+from tracer.timing import clock_name
 
 #: our scene, the paper's model, paper N, paper empirical M, paper theoretical M (8N), paper penalty %
 PAPER = [
@@ -38,36 +36,30 @@ KINDS = ("random", "camera")
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the five of Table 2)")
-    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 100000; --quick 10000)")
-    p.add_argument("--repeats", type=int, default=None, help="timed repeats per point (default 5)")
-    p.add_argument("--seed", type=int, default=0)
+    add_ray_args(p, "comma-separated scenes (default: the five of Table 2)",
+                 "rays per kind (default 100000; --quick 10000)", "timed repeats per point (default 5)")
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)  # one pinned thread: per-ray costs without scheduling noise
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
-    n_rays = args.rays or (10_000 if quick else 100_000)
-    repeats = args.repeats or (5 if not quick else 3)
+    # one pinned thread: per-ray costs without scheduling noise
+    tr = begin(ctx, args, "table2", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads or 1, log=log)
+    quick = tr.quick
+    n_rays, repeats = tr.ray_budget(10_000, 100_000)
     factors = QUICK_FACTORS if quick else FULL_FACTORS
-    out_dir = Path(args.out) / "table2"
     store = ctx.store()  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
 
     rows, scenes, rays = [], {}, {}
-    for name in names:
-        scene = load_scene(name)
+    for name, scene in tr.scenes():
         scenes[name] = scene
-        rays[name] = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
+        rays[name] = kind_rays(scene, KINDS, n_rays, args.seed)
         rows += sweep(scene, "grid", grid_cells(scene, factors), rays[name], store, repeats,
                       desc=f"table2 {name}")
     df = pd.DataFrame(rows)
 
-    # Ti/Ts on this machine: pooled counter regression over every scene's random-ray sweep
-    rnd = df[df.ray_kind == "random"]
-    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    # Ti/Ts on this machine: pooled counter regression over every scene's random-ray sweep; and does one
+    # (Ts, Ti) pair serve all scenes? per-scene constants when the AIC says so
+    cfit, pool, scene_ratio = counter_fits(df)
     ratio = cfit.ti_over_ts_
     ratio_ok = bool(np.isfinite(ratio) and ratio > 0 and cfit.ts_ > 0)
     if not ratio_ok:  # an ill-conditioned or noisy fit: say so, use the paper's ratio for the theory column
@@ -75,13 +67,8 @@ def run(ctx, args, log=print) -> dict:
             f"timings too noisy to fit — the 'fitted' column uses the paper's Ti/Ts = {IZE_TI_OVER_TS}")
         ratio = IZE_TI_OVER_TS
 
-    # does one (Ts, Ti) pair serve all scenes? per-scene constants when the AIC says so
-    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
-    scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
-
     # the memory-aware model's M for each scene and kind, constants from the other scenes (memmodel)
-    mach = memmodel.machine(quick, log=log)
-    mem_m = {(name, kind): memmodel.memory_aware_cells(df, name, kind, mach) for name in scenes for kind in KINDS}
+    mem_m = memmodel.memory_aware_table(df, scenes, KINDS, quick, log=log)
 
     # measure the extra points: refined best M, the fitted-theory M and the memory-aware M, per scene and kind
     extra = []
@@ -139,22 +126,26 @@ def run(ctx, args, log=print) -> dict:
     tab = pd.DataFrame(table)
     fit_df = pd.DataFrame(fits)
 
-    ctx.write_csv(out_dir / "table2.csv", df)
-    ctx.write_csv(out_dir / "table2_summary.csv", tab)
-    ctx.write_csv(out_dir / "fits.csv", fit_df)
-    summary = _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, args.seed, pool)
+    summary = _summary(tab, fit_df, cfit, ratio, n_rays, repeats, tr.threads, args.seed, pool)
     if not ratio_ok:
         summary = summary.replace("## Reading", "**Warning:** the pooled fit was degenerate (Ts or Ti at 0): the timings "
                                   "of this run are too noisy to fit, and the 'fitted' column uses the paper's Ti/Ts = 4.\n\n"
                                   "## Reading")
-    atomic_write(out_dir / "summary.md", summary)
-    _figure(ctx, df, fit_df, scenes, ratio)
-    ctx.write_meta(out_dir, "table2", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
-               ray_kinds=list(KINDS), sweep_factors=factors, scenes=names, quick=quick,
-               fitted_ti_over_ts=ratio, fitted_ts_ns=cfit.ts_, fitted_ti_ns=cfit.ti_,
-               fitted_ci=cfit.ci_, fit_cond=cfit.cond_)
-    log(summary)
+    tr.finish(summary, {"table2.csv": df, "table2_summary.csv": tab, "fits.csv": fit_df},
+              figure=lambda: _figure(ctx, df, fit_df, scenes, ratio), rays_per_kind=n_rays, repeats=repeats,
+              seed=args.seed, ray_kinds=list(KINDS), sweep_factors=factors, scenes=tr.names, quick=quick,
+              fitted_ti_over_ts=ratio, fitted_ts_ns=cfit.ts_, fitted_ti_ns=cfit.ti_, fitted_ci=cfit.ci_,
+              fit_cond=cfit.cond_)
     return {"table": tab, "fits": fit_df, "ratio": ratio}
+
+
+def counter_fits(df: pd.DataFrame) -> tuple:
+    """(pooled :class:`CounterCostFit`, :func:`pooling_evidence`, scene -> its own Ti/Ts) of the
+    random-ray rows of a one-level sweep (shared with ``table3``)."""
+    rnd = df[df.ray_kind == "random"]
+    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    return cfit, pool, {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
 
 
 def _verdict(tab, pool) -> str:
@@ -177,11 +168,7 @@ def _verdict(tab, pool) -> str:
 
 
 def _fmt(v, pct=False):
-    if v is None or (isinstance(v, float) and np.isnan(v)):
-        return "–"
-    if pct:
-        return f"{v:.1f}%"
-    return f"{int(v):,}"
+    return dash(v, "{:.1f}%") if pct else dash_int(v)
 
 
 def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> str:
@@ -265,11 +252,8 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
 
 
 def _figure(ctx, df, fit_df, scenes, ratio):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     n = len(scenes)
-    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 2.8), squeeze=False)
+    fig, axes = subplots(1, n, figsize=(3.2 * n, 2.8), squeeze=False)
     for ax, (name, scene) in zip(axes[0], scenes.items()):
         for kind, mk in (("random", "o"), ("camera", "s")):
             k = df[(df.scene == name) & (df.ray_kind == kind)].sort_values("cells")
@@ -279,17 +263,12 @@ def _figure(ctx, df, fit_df, scenes, ratio):
             ax.plot(Ms / scene.n, g.predict(Ms), "-", lw=1, label=f"{kind} Eq 1 fit")
         ax.axvline(8, color="k", ls=":", lw=1, label="M = 8N (paper)")
         ax.axvline(2 * ratio, color="r", ls="--", lw=1, label=f"M = 2N·Ti/Ts = {2 * ratio:.1f}N")
-        ax.set_xscale("log")
-        ax.set_title(f"{name} (N = {scene.n:,})", fontsize=8)
-        ax.set_xlabel("cells per triangle M/N")
-        ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("time per ray (ns)")
-    axes[0][-1].legend(fontsize=6)
-    ctx.finish_figure(fig, "table2")
+    finish_log_panels(ctx, fig, axes, (f"{name} (N = {scene.n:,})" for name, scene in scenes.items()),
+                      "cells per triangle M/N", "time per ray (ns)", "table2")
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
+    run_quiet(run, ctx, args)
     if args.json:
         import json
         import sys

@@ -4,21 +4,17 @@ best swept M; penalty, cell memory, and the speed-up / size over M = 8N (paper: 
 14x/63x/141x larger)."""
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
+from costmodel.fit import GridCostFit, refine_minimum
 from experiments.ize import memmodel, memprobe
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
+from experiments.ize.table2 import counter_fits
+from experiments.core.common import add_ray_args, dash_int
+from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
+from experiments.core.target import begin, kind_rays, run_quiet
 from tracer.memory import cache_bytes
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 #: scene, paper N, paper empirical M, paper theoretical M, paper penalty %, paper speed-up, paper size x
 PAPER = [
@@ -31,10 +27,8 @@ KINDS = ("random", "camera")
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the three cylinders)")
-    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 50000; --quick 5000)")
-    p.add_argument("--repeats", type=int, default=None)
-    p.add_argument("--seed", type=int, default=0)
+    add_ray_args(p, "comma-separated scenes (default: the three cylinders)",
+                 "rays per kind (default 50000; --quick 5000)")
 
 
 def cells_sweep(n: int, points: int) -> list[dict]:
@@ -44,32 +38,23 @@ def cells_sweep(n: int, points: int) -> list[dict]:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
-    n_rays = args.rays or (5_000 if quick else 50_000)
-    repeats = args.repeats or (3 if quick else 5)
-    out_dir = Path(args.out) / "table3"
+    tr = begin(ctx, args, "table3", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads or 1, log=log)
+    quick = tr.quick
+    n_rays, repeats = tr.ray_budget(5_000, 50_000)
     store = ctx.store(code=("experiments/ize/memprobe.py",))  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
     rows, scenes, rays = [], {}, {}
-    for name in names:
-        scene = load_scene(name)
+    for name, scene in tr.scenes():
         scenes[name] = scene
-        rays[name] = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
+        rays[name] = kind_rays(scene, KINDS, n_rays, args.seed)
         rows += sweep(scene, "grid", cells_sweep(scene.n, 8 if quick else 14), rays[name], store, repeats,
                       desc=f"table3 {name}")
     df = pd.DataFrame(rows)
-    rnd = df[df.ray_kind == "random"]
-    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    # pooled Ti/Ts; one (Ts, Ti) pair for all cylinders, or one per cylinder? (AIC, as table2)
+    cfit, pool, scene_ratio = counter_fits(df)
     ratio = cfit.ti_over_ts_
-    # one (Ts, Ti) pair for all cylinders, or one per cylinder? (AIC, as table2)
-    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
-    scene_ratio = {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
     # the memory-aware model's M per cylinder and kind, constants from the other cylinders (memmodel)
-    mach = memmodel.machine(quick, log=log)
-    mem_m = {(name, kind): memmodel.memory_aware_cells(df, name, kind, mach) for name in scenes for kind in KINDS}
+    mem_m = memmodel.memory_aware_table(df, scenes, KINDS, quick, log=log)
     extra = []
     for name, scene in scenes.items():
         k = df[(df.scene == name) & (df.ray_kind == "random")]
@@ -123,21 +108,15 @@ def run(ctx, args, log=print) -> dict:
                   "paper_speedup": p[5], "paper_size": p[6]})
         table.append(e)
     tab, fit_df = pd.DataFrame(table), pd.DataFrame(fits)
-    ctx.write_csv(out_dir / "table3.csv", df)
-    ctx.write_csv(out_dir / "table3_summary.csv", tab)
-    ctx.write_csv(out_dir / "fits.csv", fit_df)
-    md = _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df, scenes)
-    _memory_figure(ctx, df, tab)
-    ctx.write_meta(out_dir, "table3", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
-               scenes=names, quick=quick, fitted_ti_over_ts=ratio)
-    log(md)
+    tr.finish(_summary(tab, fit_df, ratio, cfit, n_rays, repeats, tr.threads, pool),
+              {"table3.csv": df, "table3_summary.csv": tab, "fits.csv": fit_df},
+              figure=lambda: (_figure(ctx, df, scenes), _memory_figure(ctx, df, tab)), rays_per_kind=n_rays,
+              repeats=repeats, seed=args.seed, scenes=tr.names, quick=quick, fitted_ti_over_ts=ratio)
     return {"table": tab}
 
 
 def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
-    f = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{int(v):,}"  # noqa: E731
+    f = dash_int
     lines = ["# Table 3 (Ize 2007): long skinny triangles, M = 8N^1.5 vs best swept M", "",
              f"Ize's cylinders of N long skinny triangles (sides spanning the height, fan caps); random rays ({n_rays:,} per point; camera rays second), "
              f"median of {repeats} runs, {threads} thread(s). Ti/Ts fitted on these sweeps: {ratio:.2f} "
@@ -225,10 +204,7 @@ def _memory_split(store, df, scene, random_rays, quick) -> dict:
 
 def _memory_figure(ctx, df, tab):
     """Excess over the memory-free count model against the structure's size, L2 and L3 marked."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(3.4, 2.6))
+    fig, ax = subplots(figsize=(3.4, 2.6))
     for _, r in tab.iterrows():
         k = df[(df.scene == r.scene) & (df.ray_kind == "random")].drop_duplicates("cells").sort_values("memory_bytes")
         ax.plot(k.memory_bytes / 2**20, memprobe.excess(k, r), "o-", ms=3, lw=1, label=f"N = {r.N:,}")
@@ -243,10 +219,7 @@ def _memory_figure(ctx, df, tab):
 
 
 def _figure(ctx, df, scenes):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, len(scenes), figsize=(3.2 * len(scenes), 2.8), squeeze=False)
+    fig, axes = subplots(1, len(scenes), figsize=(3.2 * len(scenes), 2.8), squeeze=False)
     for ax, (name, scene) in zip(axes[0], scenes.items()):
         k = df[(df.scene == name) & (df.ray_kind == "random")].sort_values("cells")
         ax.plot(k.cells, k.anchored_ns_per_ray, "o", ms=3, label="measured (random rays)")
@@ -256,15 +229,8 @@ def _figure(ctx, df, scenes):
             ax.plot(Ms, g.predict(Ms), ls, lw=1, label=f"Eq {'5' if form == 'skinny' else '1'} fit")
         ax.axvline(8 * scene.n**1.5, color="r", ls="--", lw=1, label="8N^1.5")
         ax.axvline(8 * scene.n, color="k", ls=":", lw=1, label="8N")
-        ax.set_xscale("log")
-        ax.set_title(f"{name}", fontsize=8)
-        ax.set_xlabel("grid cells M")
-        ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("time per ray (ns)")
-    axes[0][-1].legend(fontsize=6)
-    ctx.finish_figure(fig, "table3")
+    finish_log_panels(ctx, fig, axes, (f"{name}" for name in scenes), "grid cells M", "time per ray (ns)", "table3")
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

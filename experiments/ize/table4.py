@@ -3,21 +3,15 @@ M1 found by sweeping (M2 = 8 N2 kept); total cells, penalty, and the speed-up ov
 grid (paper: about 2x on Buddha, 2.4x on the conference room)."""
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
-import numpy as np
 import pandas as pd
 
 from costmodel.fit import refine_minimum
-from experiments.ize.table2 import PAPER as PAPER2
-from experiments.core.common import scene_list
-from experiments.ize import memmodel
-from experiments.core.store import atomic_write
+from experiments.core.common import add_ray_args, dash, dash_int
+from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import penalty_range, FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
+from experiments.core.target import begin, kind_rays, run_quiet
+from experiments.ize import memmodel
+from experiments.ize.table2 import PAPER as PAPER2
 
 #: scene -> (paper model, paper N, paper empirical total cells, paper theoretical total cells, penalty %)
 PAPER = {
@@ -34,10 +28,8 @@ KINDS = ("random", "camera")
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the five of Table 2)")
-    p.add_argument("--rays", type=int, default=None, help="rays per kind (default 100000; --quick 10000)")
-    p.add_argument("--repeats", type=int, default=None)
-    p.add_argument("--seed", type=int, default=0)
+    add_ray_args(p, "comma-separated scenes (default: the five of Table 2)",
+                 "rays per kind (default 100000; --quick 10000)")
 
 
 def m1_sweep(n: int, quick: bool) -> list[dict]:
@@ -48,18 +40,13 @@ def m1_sweep(n: int, quick: bool) -> list[dict]:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER2])
-    n_rays = args.rays or (10_000 if quick else 100_000)
-    repeats = args.repeats or (3 if quick else 5)
+    tr = begin(ctx, args, "table4", (QUICK_SCENES, [p[0] for p in PAPER2]), threads=args.threads or 1, log=log)
+    quick = tr.quick
+    n_rays, repeats = tr.ray_budget(10_000, 100_000)
     store = ctx.store()
-    out_dir = Path(args.out) / "table4"
     rows, one_rows, table, sw = [], [], [], {}
-    for name in names:
-        scene = load_scene(name)
-        rays = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in KINDS}
+    for name, scene in tr.scenes():
+        rays = kind_rays(scene, KINDS, n_rays, args.seed)
         two = pd.DataFrame(sweep(scene, "nested", m1_sweep(scene.n, quick), rays, store, repeats, desc=f"table4 {name}"))
         r = two[two.ray_kind == "random"]
         best_m1 = refine_minimum(r.param_m1, r.anchored_ns_per_ray)
@@ -114,19 +101,14 @@ def run(ctx, args, log=print) -> dict:
         table.append(e)
     df = pd.concat(rows + one_rows, ignore_index=True)
     tab = pd.DataFrame(table)
-    ctx.write_csv(out_dir / "table4.csv", df)
-    ctx.write_csv(out_dir / "table4_summary.csv", tab)
-    md = _summary(tab, n_rays, repeats, threads)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, pd.concat(rows, ignore_index=True), tab)
-    ctx.write_meta(out_dir, "table4", started, threads=threads, rays_per_kind=n_rays, repeats=repeats, seed=args.seed,
-               scenes=names, quick=quick)
-    log(md)
+    tr.finish(_summary(tab, n_rays, repeats, tr.threads), {"table4.csv": df, "table4_summary.csv": tab},
+              figure=lambda: _figure(ctx, pd.concat(rows, ignore_index=True), tab), rays_per_kind=n_rays,
+              repeats=repeats, seed=args.seed)
     return {"table": tab}
 
 
 def _summary(tab, n_rays, repeats, threads) -> str:
-    f = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{int(v):,}"  # noqa: E731
+    f = dash_int
     lines = ["# Table 4 (Ize 2007): two-level grids, M1 = (8N)^(3/5), M2 = 8 N2 vs the best swept M1", "",
              f"Random rays ({n_rays:,} per point; camera rays as second column), median of {repeats} runs, "
              f"{threads} thread(s). Sweep of M1 from (8N)^0.6/16 to 16 (8N)^0.6 with M2 = 8 N2. The penalty and "
@@ -137,8 +119,7 @@ def _summary(tab, n_rays, repeats, threads) -> str:
              "speed-up over best one-level grid ours (paper) | camera: penalty, speed-up |",
              "|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
-        sp = "–" if r.paper_speedup is None or (isinstance(r.paper_speedup, float) and np.isnan(r.paper_speedup)) \
-            else f"{r.paper_speedup}x"
+        sp = dash(r.paper_speedup, "{}x")
         lines.append(f"| {r.scene} ({r.paper_model}) | {r.N:,} | {f(r.empirical_M1)} (theory {f(r.theory_M1)}) | "
                      f"{f(r.empirical_total_cells)} ({f(r.paper_empirical_total_cells)}), {f(r.theory_total_cells)} "
                      f"({f(r.paper_theory_total_cells)}) | {r.penalty_pct:.1f}% [{r.penalty_range}] ({r.paper_penalty_pct}%) | "
@@ -166,25 +147,16 @@ def _summary(tab, n_rays, repeats, threads) -> str:
 
 
 def _figure(ctx, df, tab):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     scenes = list(tab.scene)
-    fig, axes = plt.subplots(1, len(scenes), figsize=(3.0 * len(scenes), 2.7), squeeze=False)
+    fig, axes = subplots(1, len(scenes), figsize=(3.0 * len(scenes), 2.7), squeeze=False)
     for ax, (_, r) in zip(axes[0], tab.iterrows()):
         for kind, mk in (("random", "o"), ("camera", "s")):
             k = df[(df.scene == r.scene) & (df.ray_kind == kind) & (df.structure == "nested")].sort_values("M1")
             ax.plot(k.M1, k.anchored_ns_per_ray, mk + "-", ms=3, lw=0.8, label=kind)
         ax.axvline(r.theory_M1, color="r", ls="--", lw=1, label="(8N)^0.6")
-        ax.set_xscale("log")
-        ax.set_title(f"{r.scene} (N = {r.N:,})", fontsize=8)
-        ax.set_xlabel("top-level cells M1", fontsize=8)
-        ax.tick_params(labelsize=7)
-    axes[0][0].set_ylabel("time per ray (ns)", fontsize=8)
-    axes[0][-1].legend(fontsize=6)
-    ctx.finish_figure(fig, "table4")
+    finish_log_panels(ctx, fig, axes, (f"{r.scene} (N = {r.N:,})" for _, r in tab.iterrows()), "top-level cells M1",
+                      "time per ray (ns)", "table4", label_size=8)
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -10,17 +10,12 @@ at which the best packet size first drops.
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import pandas as pd
 
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
-from experiments.core.common import progress
+from experiments.core.common import add_image_args
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
 from experiments.wald.fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 PACKETS = (1, 2, 4, 8, 16, 32)
 SCENES = ["bunny-948", "bunny-3851", "bunny-16k", "bunny-69k", "dragon-11k", "dragon-48k"]
@@ -30,9 +25,8 @@ PAPER_CROSSOVER_N = 250_000
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: bunny and dragon resolutions)")
-    p.add_argument("--side", type=int, default=None, help="image side in pixels (default 512; --quick 128)")
-    p.add_argument("--repeats", type=int, default=None, help="timed repeats per point (default 5)")
+    add_image_args(p, "comma-separated scenes (default: bunny and dragon resolutions)",
+                   "image side in pixels (default 512; --quick 128)", "timed repeats per point (default 5)")
     p.add_argument("--lam", type=float, default=5.0, help="grid resolution factor lambda")
 
 
@@ -51,19 +45,14 @@ def crossover(best: pd.DataFrame, col: str):
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads or 1)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, SCENES)
-    side = args.side or (128 if quick else 512)
+    tr = begin(ctx, args, "wald-fig7", (QUICK_SCENES, SCENES), threads=args.threads or 1, log=log)
+    side = tr.pick(args.side, 128, 512)
     repeats = args.repeats or 5
-    out_dir = Path(args.out) / "wald-fig7"
     store = ctx.store(code=("experiments/wald/fig6.py",))
     rows = []
-    for name in progress(names, "wald-fig7", quiet=getattr(args, "json", False)):
-        scene = load_scene(name)
+    for _, scene in tr.scenes("wald-fig7"):
         rows += measure_points(store, "wald-fig7", scene, [{"lam": float(args.lam), "packet": k} for k in PACKETS],
-                               side, repeats, threads, log)
+                               side, repeats, tr.threads, log)
     df = pd.DataFrame(rows)
     df["normalised"] = df.ns_per_ray / df.groupby("scene").ns_per_ray.transform("min")
     pred, best = loso_predictions(df, "packet")
@@ -72,15 +61,11 @@ def run(ctx, args, log=print) -> dict:
     cross = crossover(best, "measured_best_packet")
     cross_pred = crossover(best, "predicted_best_packet")
     fit = pooled_fit(df)
-    ctx.write_csv(out_dir / "fig7.csv", df)
-    ctx.write_csv(out_dir / "best.csv", best)
-    ctx.write_csv(out_dir / "crossover.csv", pd.concat([cross.assign(source="measured"), cross_pred.assign(source="cost model")]))
-    md = _summary(df, best, cross, cross_pred, fit, side, repeats, threads, args.lam)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df)
-    ctx.write_meta(out_dir, "wald-fig7", started, threads=threads, side=side, repeats=repeats, scenes=names,
-               packets=list(PACKETS), lam=args.lam, quick=quick)
-    log(md)
+    tr.finish(_summary(df, best, cross, cross_pred, fit, side, repeats, tr.threads, args.lam),
+              {"fig7.csv": df, "best.csv": best,
+               "crossover.csv": pd.concat([cross.assign(source="measured"), cross_pred.assign(source="cost model")])},
+              figure=lambda: _figure(ctx, df), side=side, repeats=repeats, scenes=tr.names, packets=list(PACKETS),
+              lam=args.lam)
     return {"table": df, "best": best}
 
 
@@ -118,10 +103,7 @@ def _summary(df, best, cross, cross_pred, fit, side, repeats, threads, lam) -> s
 
 
 def _figure(ctx, df):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.0))
+    fig, axes = subplots(1, 2, figsize=(8, 3.0))
     for name, d in df.sort_values("N").groupby("scene", sort=False):
         d = d.sort_values("packet")
         line, = axes[0].plot(d.packet, d.ns_per_ray, "o-", ms=3, lw=1, label=f"{name}")
@@ -143,5 +125,4 @@ def _figure(ctx, df):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -12,19 +12,16 @@ tracing it, and trace time as the model resolution grows at fixed lambda.
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import progress, scene_list
-from experiments.core.store import atomic_write
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
 from experiments.wald.fig6 import packet_work
 from experiments.wald.views import paired, wald_camera
 from tracer.packet import CoherentGrid
 from tracer.scene import load_scene
-from tracer.timing import build_clock, clock_name, set_threads, time_call
+from tracer.timing import build_clock, clock_name, time_call
 
 LARGEST = "dragon-871k"
 FAMILY = ["bunny-948", "bunny-3851", "bunny-16k", "bunny-69k", "dragon-11k", "dragon-48k", "dragon-202k", "dragon-871k"]
@@ -70,28 +67,17 @@ def model_resolution(scene, side: int, rounds: int) -> dict:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(1)
-    side = args.side or (128 if args.quick else 1024)
+    tr = begin(ctx, args, "wald-fig8", (QUICK_FAMILY, FAMILY), threads=1, log=log)
+    side = tr.pick(args.side, 128, 1024)
     rounds = args.repeats or 5
-    largest = args.largest or (QUICK_LARGEST if args.quick else LARGEST)
-    names = scene_list(args, QUICK_FAMILY, FAMILY)
-    out_dir = Path(args.out) / "wald-fig8"
-    scenes = {}
-    for name in progress(names, "wald-fig8", quiet=getattr(args, "json", False)):
-        scenes[name] = load_scene(name)
+    largest = tr.pick(args.largest, QUICK_LARGEST, LARGEST)
+    scenes = dict(tr.scenes("wald-fig8"))
     big = scenes.get(largest) or load_scene(largest)
     rb = rebuild_vs_trace(big, side, rounds)
     log(rb.to_string())
-    mr = pd.DataFrame([model_resolution(scenes[n], side, rounds) for n in names])
-    ctx.write_csv(out_dir / "rebuild.csv", rb)
-    ctx.write_csv(out_dir / "model_resolution.csv", mr)
-    md = _summary(rb, mr, side, rounds)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, rb, mr)
-    ctx.write_meta(out_dir, "wald-fig8", started, threads=threads, side=side, rounds=rounds, largest=largest,
-                   scenes=names, quick=args.quick)
-    log(md)
+    mr = pd.DataFrame([model_resolution(scenes[n], side, rounds) for n in tr.names])
+    tr.finish(_summary(rb, mr, side, rounds), {"rebuild.csv": rb, "model_resolution.csv": mr},
+              figure=lambda: _figure(ctx, rb, mr), side=side, rounds=rounds, largest=largest)
     return {"rebuild": rb, "model_resolution": mr}
 
 
@@ -133,10 +119,7 @@ def _summary(rb, mr, side, rounds) -> str:
 
 
 def _figure(ctx, rb, mr):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.0))
+    fig, axes = subplots(1, 2, figsize=(8, 3.0))
     x = np.arange(len(rb))
     axes[0].bar(x, rb.build_s, 0.5, label="build")
     axes[0].bar(x, rb.trace_s, 0.5, bottom=rb.build_s, label="trace")
@@ -156,5 +139,4 @@ def _figure(ctx, rb, mr):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

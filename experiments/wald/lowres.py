@@ -12,21 +12,18 @@ which of them grows as the resolution falls says what limits packets there.
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import progress, scene_list
-from experiments.core.store import atomic_write
+from experiments.core.common import add_image_args
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
 from experiments.wald.fig6 import model_X, packet_work, pooled_fit
 from experiments.wald.views import paired, wald_camera
 from tracer.errors import GridcostError
 from tracer.grid import UniformGrid
 from tracer.packet import CoherentGrid
-from tracer.scene import load_scene
-from tracer.timing import clock_name, set_threads
+from tracer.timing import clock_name
 
 SCENES = ["bunny-69k", "dragon-202k"]
 QUICK_SCENES = ["bunny-948"]
@@ -37,7 +34,7 @@ GOALS = {512: 1.0, 1024: 1.3}
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: bunny-69k, dragon-202k)")
+    add_image_args(p, "comma-separated scenes (default: bunny-69k, dragon-202k)")
     p.add_argument("--sides", default=None, help="comma-separated image sides (default 128,256,447,512,1024)")
     p.add_argument("--repeats", type=int, default=None, help="interleaved rounds per side (default 5)")
 
@@ -69,15 +66,11 @@ def measure(scene, side: int, rounds: int) -> dict:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(1)
-    names = scene_list(args, QUICK_SCENES, SCENES)
-    sides = [int(s) for s in args.sides.split(",")] if args.sides else list(QUICK_SIDES if args.quick else SIDES)
+    tr = begin(ctx, args, "wald-lowres", (QUICK_SCENES, SCENES), threads=1, log=log)
+    sides = [int(s) for s in args.sides.split(",")] if args.sides else list(QUICK_SIDES if tr.quick else SIDES)
     rounds = args.repeats or 5
-    out_dir = Path(args.out) / "wald-lowres"
     rows = []
-    for name in progress(names, "wald-lowres", quiet=getattr(args, "json", False)):
-        scene = load_scene(name)
+    for name, scene in tr.scenes("wald-lowres"):
         for side in sides:
             row = measure(scene, side, rounds)
             rows.append(row)
@@ -86,13 +79,7 @@ def run(ctx, args, log=print) -> dict:
     fit = pooled_fit(df)
     share = pd.DataFrame([fit.shares(model_X(df.iloc[[i]])) for i in range(len(df))], index=df.index)
     df = pd.concat([df, share.add_prefix("share_")], axis=1)
-    ctx.write_csv(out_dir / "lowres.csv", df)
-    md = _summary(df, fit, rounds)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df)
-    ctx.write_meta(out_dir, "wald-lowres", started, threads=threads, sides=sides, rounds=rounds, scenes=names,
-                   quick=args.quick)
-    log(md)
+    tr.finish(_summary(df, fit, rounds), {"lowres.csv": df}, figure=lambda: _figure(ctx, df), sides=sides, rounds=rounds)
     return {"table": df}
 
 
@@ -158,10 +145,7 @@ def _summary(df, fit, rounds) -> str:
 
 
 def _figure(ctx, df):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(5.5, 3.0))
+    fig, ax = subplots(figsize=(5.5, 3.0))
     for name, d in df.groupby("scene", sort=False):
         d = d.sort_values("side")
         line, = ax.plot(d.side, d.cgt_over_embree, "o-", ms=3, label=f"{name} CGT / Embree")
@@ -175,5 +159,4 @@ def _figure(ctx, df):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -12,19 +12,14 @@ Beside: the single-ray kd-tree of :mod:`tracer.kdtree` (tests per ray) where the
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
-from experiments.core.common import progress
+from experiments.core.common import add_image_args, dash
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
+from experiments.wald.views import paper_cell, scene_label, wald_camera
 from tracer.packet import CoherentGrid
-from experiments.wald.views import wald_camera
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 #: our scene, the paper's scene it stands in for, paper #tris, n/n, y/n, y/y (millions), kd-tree
 PAPER = [
@@ -38,8 +33,7 @@ PAPER_RAYS = 1024 * 1024
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the four stand-ins)")
-    p.add_argument("--side", type=int, default=None, help="image side (default 1024; --quick 128)")
+    add_image_args(p, "comma-separated scenes (default: the four stand-ins)", "image side (default 1024; --quick 128)")
     p.add_argument("--packet", type=int, default=4, help="packet size k (the paper: 4)")
     p.add_argument("--exact", action="store_true", help="exact triangle/cell insertion instead of bounding boxes")
     p.add_argument("--no-kdtree", action="store_true", help="skip the single-ray kd-tree column")
@@ -67,16 +61,12 @@ def kdtree_tests(scene, side: int) -> float:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
-    side = args.side or (128 if quick else 1024)
-    out_dir = Path(args.out) / "wald-table1"
+    tr = begin(ctx, args, "wald-table1", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads, log=log)
+    quick = tr.quick
+    side = tr.pick(args.side, 128, 1024)
     paper = {p[0]: p for p in PAPER}
     rows = []
-    for name in progress(names, "wald-table1", quiet=getattr(args, "json", False)):
-        scene = load_scene(name)
+    for name, scene in tr.scenes("wald-table1"):
         row = count_tests(scene, side, args.packet, args.exact)
         if not args.no_kdtree:
             row["kdtree_tests"] = kdtree_tests(scene, min(side, 256 if not quick else side))
@@ -94,18 +84,9 @@ def run(ctx, args, log=print) -> dict:
         df["paper_mb_factor"] = df.paper_nn / df.paper_yn
         df["paper_fc_factor"] = df.paper_yn / df.paper_yy
         df["paper_total_factor"] = df.paper_nn / df.paper_yy
-    ctx.write_csv(out_dir / "table1.csv", df)
-    md = _summary(df, side, args.packet, args.exact)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df)
-    ctx.write_meta(out_dir, "wald-table1", started, threads=threads, side=side, packet=args.packet, exact=args.exact,
-               scenes=names, quick=quick)
-    log(md)
+    tr.finish(_summary(df, side, args.packet, args.exact), {"table1.csv": df}, figure=lambda: _figure(ctx, df),
+              side=side, packet=args.packet, exact=args.exact)
     return {"table": df}
-
-
-def _f(v, fmt="{:.1f}"):
-    return "–" if v is None or (isinstance(v, float) and np.isnan(v)) else fmt.format(v)
 
 
 def _summary(df, side, k, exact) -> str:
@@ -122,15 +103,14 @@ def _summary(df, side, k, exact) -> str:
              "FC factor ours (paper) | n/n over y/y ours (paper) | kd-tree M/frame ours | kd-tree M/frame paper |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, r in df.iterrows():
-        ps = r.get("paper_scene")
-        cells = [f"{r[c] * scale:.2f} | {_f(r.get(pc), '{:.2f}')}"
+        cells = [f"{r[c] * scale:.2f} | {paper_cell(r, pc)}"
                  for c, pc in (("tests_plain", "paper_nn"), ("tests_mb", "paper_yn"), ("tests_mb_fc", "paper_yy"))]
         lines.append(
-            f"| {r.scene}{f' ({ps})' if isinstance(ps, str) else ''} | {r.N:,} ({_f(r.get('paper_N'), '{:,.0f}')}) | "
+            f"| {scene_label(r)} | {r.N:,} ({paper_cell(r, 'paper_N', '{:,.0f}')}) | "
             + " | ".join(cells) + f" | {r.tests_mb_fc:.2f} | "
-            f"{r.mb_factor:.2f} ({_f(r.get('paper_mb_factor'), '{:.2f}')}) | {r.fc_factor:.2f} ({_f(r.get('paper_fc_factor'), '{:.2f}')}) | "
-            f"{r.total_factor:.1f} ({_f(r.get('paper_total_factor'))}) | {_f(r.get('kdtree_tests', np.nan) * scale, '{:.2f}')} | "
-            f"{_f(r.get('paper_kd'), '{:.2f}')} |")
+            f"{r.mb_factor:.2f} ({paper_cell(r, 'paper_mb_factor')}) | {r.fc_factor:.2f} ({paper_cell(r, 'paper_fc_factor')}) | "
+            f"{r.total_factor:.1f} ({paper_cell(r, 'paper_total_factor', '{:.1f}')}) | "
+            f"{dash(r.get('kdtree_tests', np.nan) * scale, '{:.2f}')} | {paper_cell(r, 'paper_kd')} |")
     lines += ["", "## Reading", "",
               "Paper: MB alone up to 2x, FC on top 4-9x, together 8.5-14x. Ours: MB "
               f"{df.mb_factor.min():.2f}-{df.mb_factor.max():.2f}x, FC on top {df.fc_factor.min():.1f}-{df.fc_factor.max():.1f}x, "
@@ -147,10 +127,7 @@ def _summary(df, side, k, exact) -> str:
 
 
 def _figure(ctx, df):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(5.5, 3.0))
+    fig, ax = subplots(figsize=(5.5, 3.0))
     x = np.arange(len(df))
     for j, (col, lab) in enumerate((("tests_plain", "n/n"), ("tests_mb", "MB"), ("tests_mb_fc", "MB + FC"))):
         ax.bar(x + (j - 1) * 0.27, df[col], 0.27, label=f"ours {lab}")
@@ -165,5 +142,4 @@ def _figure(ctx, df):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -13,21 +13,19 @@ timed (no shading: the paper's fps include simple shading).
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import progress, scene_list
-from experiments.core.store import atomic_write
+from experiments.core.common import add_image_args
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
 from experiments.wald.fig6 import packet_work
 from experiments.wald.table4 import PAPER as PAPER4
-from experiments.wald.views import light_position, paired, shadow_rays, wald_camera
+from experiments.wald.views import paper_cell as _p
+from experiments.wald.views import light_position, paired, scene_label, shadow_rays, wald_camera
 from tracer.grid import UniformGrid
 from tracer.packet import CoherentGrid
-from tracer.scene import load_scene
-from tracer.timing import clock_name, set_threads
+from tracer.timing import clock_name
 
 #: the paper's Table 3 (frames per second at 1024², 1 thread): paper scene -> (single-ray, 8x8 packets, ratio)
 PAPER = {"ben": (1.57, 10.6, 6.75), "hand": (1.59, 16.1, 10.1), "toys": (1.53, 20.0, 13.1),
@@ -40,9 +38,8 @@ PAPER_MACRO_GAIN = 1.30
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the five Table 1/4 stand-ins)")
-    p.add_argument("--side", type=int, default=None, help="image side (default 1024, the paper's; --quick 128)")
-    p.add_argument("--repeats", type=int, default=None, help="interleaved rounds (default 5)")
+    add_image_args(p, "comma-separated scenes (default: the five Table 1/4 stand-ins)",
+                   "image side (default 1024, the paper's; --quick 128)", "interleaved rounds (default 5)")
 
 
 def measure(scene, side: int, rounds: int) -> dict:
@@ -102,31 +99,17 @@ def _single_frac(cgt, o, d, tmax) -> float:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(1)
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER4])
-    side = args.side or (128 if args.quick else 1024)
+    tr = begin(ctx, args, "wald-table3", (QUICK_SCENES, [p[0] for p in PAPER4]), threads=1, log=log)
+    side = tr.pick(args.side, 128, 1024)
     rounds = args.repeats or 5
-    out_dir = Path(args.out) / "wald-table3"
     rows = []
-    for name in progress(names, "wald-table3", quiet=getattr(args, "json", False)):
-        row = measure(load_scene(name), side, rounds)
+    for name, scene in tr.scenes("wald-table3"):
+        row = measure(scene, side, rounds)
         rows.append(row)
         log(f"  {name}: single {row['single_mrays']:.2f}, 8x8 {row['p8_mrays']:.2f} Mrays/s ({row['ratio_p8']:.2f}x)")
     df = pd.DataFrame(rows)
-    ctx.write_csv(out_dir / "table3.csv", df)
-    md = _summary(df, side, rounds)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df)
-    ctx.write_meta(out_dir, "wald-table3", started, threads=threads, side=side, rounds=rounds, scenes=names,
-                   quick=args.quick)
-    log(md)
+    tr.finish(_summary(df, side, rounds), {"table3.csv": df}, figure=lambda: _figure(ctx, df), side=side, rounds=rounds)
     return {"table": df}
-
-
-def _p(r, col, fmt="{:.2f}"):
-    v = r.get(col)
-    return "–" if v is None or (isinstance(v, float) and np.isnan(v)) else fmt.format(v)
 
 
 def _summary(df, side, rounds) -> str:
@@ -139,9 +122,8 @@ def _summary(df, side, rounds) -> str:
              "8x8 / single ours [rounds] (paper) | 4x4 / single ours | single Mrays/s | 8x8 Mrays/s |",
              "|---|---|---|---|---|---|---|---|---|"]
     for _, r in df.iterrows():
-        ps = r.get("paper_scene")
         lines.append(
-            f"| {r.scene}{f' ({ps})' if isinstance(ps, str) else ''} | {r.N:,} | {r.single_fps:.2f} ({_p(r, 'paper_single_fps')}) | "
+            f"| {scene_label(r)} | {r.N:,} | {r.single_fps:.2f} ({_p(r, 'paper_single_fps')}) | "
             f"{r.p8_fps:.2f} ({_p(r, 'paper_p8_fps', '{:.1f}')}) | {r.p4_fps:.2f} | {r.ratio_p8:.2f} "
             f"[{r.ratio_p8_min:.2f}-{r.ratio_p8_max:.2f}] ({_p(r, 'paper_ratio')}) | {r.ratio_p4:.2f} | "
             f"{r.single_mrays:.2f} | {r.p8_mrays:.2f} |")
@@ -179,10 +161,7 @@ def _summary(df, side, rounds) -> str:
 
 
 def _figure(ctx, df):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(5.5, 3.0))
+    fig, ax = subplots(figsize=(5.5, 3.0))
     x = np.arange(len(df))
     ax.bar(x - 0.2, df.ratio_p8, 0.4, label="ours 8x8 / single")
     ax.bar(x + 0.2, df.ratio_p4, 0.4, label="ours 4x4 / single")
@@ -195,5 +174,4 @@ def _figure(ctx, df):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

@@ -10,20 +10,16 @@ Packets: :class:`tracer.packet.CoherentGrid` with mailboxing and frustum culling
 """
 from __future__ import annotations
 
-import time
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import scene_list
-from experiments.core.store import atomic_write
-from experiments.core.common import progress
+from experiments.core.common import add_image_args
+from experiments.core.figures import subplots
+from experiments.core.target import begin, run_quiet
 from experiments.wald.table1 import count_tests
+from experiments.wald.views import paper_cell as _p
+from experiments.wald.views import scene_label, wald_camera
 from tracer.grid import UniformGrid
-from experiments.wald.views import wald_camera
-from tracer.scene import load_scene
-from tracer.timing import set_threads
 
 #: our scene, the paper's, then the paper's tests (M) single / 4x4 / 8x8, cells (M) single / 4x4 / 8x8,
 #: and its printed cell-ratio rows 4x4 / 8x8 (ben's printed 13.10 / 8.35 are not its counts' 8.35 / 17.7)
@@ -38,8 +34,7 @@ QUICK_SCENES = ["bunny-948", "cornell"]
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the five stand-ins)")
-    p.add_argument("--side", type=int, default=None, help="image side (default 1024; --quick 128)")
+    add_image_args(p, "comma-separated scenes (default: the five stand-ins)", "image side (default 1024; --quick 128)")
     p.add_argument("--exact", action="store_true", help="exact triangle/cell insertion instead of bounding boxes")
 
 
@@ -51,16 +46,11 @@ def single_ray(scene, res, side: int, exact: bool) -> dict:
 
 
 def run(ctx, args, log=print) -> dict:
-    started = time.time()
-    threads = set_threads(args.threads)
-    quick = args.quick
-    names = scene_list(args, QUICK_SCENES, [p[0] for p in PAPER])
-    side = args.side or (128 if quick else 1024)
-    out_dir = Path(args.out) / "wald-table4"
+    tr = begin(ctx, args, "wald-table4", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads, log=log)
+    side = tr.pick(args.side, 128, 1024)
     paper = {p[0]: p for p in PAPER}
     rows = []
-    for name in progress(names, "wald-table4", quiet=getattr(args, "json", False)):
-        scene = load_scene(name)
+    for name, scene in tr.scenes("wald-table4"):
         p4 = count_tests(scene, side, 4, args.exact, macro=0)
         p8 = count_tests(scene, side, 8, args.exact, macro=0)
         res = [int(v) for v in p4["res"].split("x")]
@@ -84,18 +74,9 @@ def run(ctx, args, log=print) -> dict:
         log(f"  {name}: cells {row['cells_single']:.1f} / {row['cells_4x4']:.2f} / {row['cells_8x8']:.2f}, "
             f"tests {row['tests_single']:.2f} / {row['tests_4x4']:.2f} / {row['tests_8x8']:.2f} per ray")
     df = pd.DataFrame(rows)
-    ctx.write_csv(out_dir / "table4.csv", df)
-    md = _summary(df, side, args.exact)
-    atomic_write(out_dir / "summary.md", md)
-    _figure(ctx, df)
-    ctx.write_meta(out_dir, "wald-table4", started, threads=threads, side=side, exact=args.exact, scenes=names, quick=quick)
-    log(md)
+    tr.finish(_summary(df, side, args.exact), {"table4.csv": df}, figure=lambda: _figure(ctx, df), side=side,
+              exact=args.exact)
     return {"table": df}
-
-
-def _p(r, col, fmt="{:.2f}"):
-    v = r.get(col)
-    return "–" if v is None or (isinstance(v, float) and np.isnan(v)) else fmt.format(v)
 
 
 def _paper_range(df) -> str:
@@ -115,9 +96,8 @@ def _summary(df, side, exact) -> str:
              "cell ratio 4x4 ours (paper) | cell ratio 8x8 ours (paper) | test ratio 4x4 / 8x8 ours (paper) |",
              "|---|---|---|---|---|---|---|---|"]
     for _, r in df.iterrows():
-        ps = r.get("paper_scene")
         lines.append(
-            f"| {r.scene}{f' ({ps})' if isinstance(ps, str) else ''} | {r.tests_single:.2f} / {r.tests_4x4:.2f} / {r.tests_8x8:.2f} | "
+            f"| {scene_label(r)} | {r.tests_single:.2f} / {r.tests_4x4:.2f} / {r.tests_8x8:.2f} | "
             f"{_p(r, 'paper_tests_single')} / {_p(r, 'paper_tests_4x4')} / {_p(r, 'paper_tests_8x8')} | "
             f"{r.cells_single:.1f} / {r.cells_4x4:.2f} / {r.cells_8x8:.2f} | "
             f"{_p(r, 'paper_cells_single', '{:.1f}')} / {_p(r, 'paper_cells_4x4')} / {_p(r, 'paper_cells_8x8')} | "
@@ -140,10 +120,7 @@ def _summary(df, side, exact) -> str:
 
 
 def _figure(ctx, df):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.0))
+    fig, axes = subplots(1, 2, figsize=(8, 3.0))
     x = np.arange(len(df))
     for ax, what in zip(axes, ("cells", "tests")):
         for j, k in enumerate(("single", "4x4", "8x8")):
@@ -158,5 +135,4 @@ def _figure(ctx, df):
 
 
 def main(ctx, args) -> int:
-    run(ctx, args, log=(lambda *a: None) if args.json else print)
-    return 0
+    return run_quiet(run, ctx, args)

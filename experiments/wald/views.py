@@ -1,6 +1,7 @@
 """Rays the Wald 2006 targets share: the camera of each stand-in scene (the room seen from inside,
 as the paper views its conference room) and shadow rays from a point light to the primary hits
-(Sec 4.7), plus the paired timing of several structures on one ray set.
+(Sec 4.7), plus the paired timing of several structures on one ray set and the cells of the summary
+tables that set a paper's number beside ours.
 """
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import dataclasses
 
 import numpy as np
 
+from experiments.core.common import dash
 from tracer.rays import Rays, bounding_sphere, camera_rays
 from tracer.timing import paired_ratio, time_paired
 
@@ -68,3 +70,14 @@ def paired(fns: dict, rounds: int, ref: str) -> tuple[dict, dict]:
     tp = time_paired(fns, rounds=rounds, repeats=1)
     med = {k: float(np.median(v)) for k, v in tp.items()}
     return med, {k: paired_ratio(tp, ref, k) for k in tp}
+
+
+def paper_cell(r, col: str, fmt: str = "{:.2f}") -> str:
+    """Column ``col`` of table row ``r`` formatted with ``fmt`` ("–" where the row has none)."""
+    return dash(r.get(col), fmt)
+
+
+def scene_label(r) -> str:
+    """A table row's scene with the paper's scene it stands in for, when it has one: "room (conf)"."""
+    ps = r.get("paper_scene")
+    return f"{r.scene}{f' ({ps})' if isinstance(ps, str) else ''}"
