@@ -16,7 +16,8 @@ offset into ``tri_verts_``/``tri_ids_``), count -1 = empty slot (box lo = +inf, 
 Traversal: the rules of :mod:`tracer.bvh` (the root box tested in float64, comparisons widened by
 ``tol`` = T_EPS of the ray's t scale, float32 vertices passed to :func:`tracer.geometry.ray_triangle`
 as the oracle passes them, so a hit's t and triangle are bit-identical to the oracle's), except that
-the four child boxes of a node are tested in float32: origin (float32 already), inverse direction
+the four child boxes of a node are tested together in float32 (one 4-lane vector operation,
+:func:`tracer.simd.slab4`): origin (float32 already), inverse direction
 rounded to float32, ``(plane - o) * inv`` per plane, NaN products (origin on a slab plane, zero
 direction) ignored. Each float32 distance that decides a hit (the entry max and exit min, both
 within [tmin, the root exit] for a ray meeting the box) is within about 3 float32 roundings (2e-7
@@ -40,6 +41,7 @@ from tracer.accel import Accel
 from tracer.bvh import BVH, BVH_TRAV_COST, T_EPS, _box
 from tracer.geometry import INF, ray_triangle
 from tracer.memory import working_set
+from tracer.simd import slab4
 
 #: int32 words per 4-wide node: 24 box words (SoA float32), 4 refs, 4 counts
 WORDS = 32
@@ -145,19 +147,6 @@ _NBITS = (0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4)
 _LOWBIT = (0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0)
 
 
-@jit(inline="always")
-def _gt(t, a):
-    """``a`` if ``a > t`` else ``t`` (one maxss): a NaN plane distance (0 * inf: origin on the plane,
-    zero direction) is ignored, i.e. the slab is no constraint."""
-    return a if a > t else t
-
-
-@jit(inline="always")
-def _lt(t, a):
-    """``a`` if ``a < t`` else ``t``; a NaN is ignored."""
-    return a if a < t else t
-
-
 @jit
 def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size,
                out_t, out_id, counters):
@@ -231,15 +220,9 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
                 else:
                     base = np.uintp(WORDS) * np.uintp(ref)
                     lim = np.float32(best + tol)
-                    mask = 0
-                    for k in range(4):  # the four slab tests, branch-free
-                        ku = base + np.uintp(k)
-                        tn = _gt(_gt(_gt(tmin32, (nf[ku + nxo] - ox) * jx), (nf[ku + nyo] - oy) * jy),
-                                 (nf[ku + nzo] - oz) * jz)
-                        tf = _lt(_lt(_lt(lim, (nf[ku + fxo] - ox) * jx), (nf[ku + fyo] - oy) * jy),
-                                 (nf[ku + fzo] - oz) * jz)
-                        t4[k] = tn
-                        mask |= np.int64(tn <= tf + tol32) << k
+                    # the four slab tests as one 4-lane float32 operation (tracer.simd)
+                    mask = slab4(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tmin32, lim,
+                                 tol32, t4)
                     if mask == 0:
                         ref = -1
                     elif _NBITS[mask] == 1:  # one child hit: visit it, no stack
