@@ -55,6 +55,9 @@ def test_bench_json(run_cli, tmp_path):
     written = list((out_dir / "bench").glob("bunny-948-*.json"))
     assert len(written) == 1
     assert json.loads(written[0].read_text())["structures"].keys() == out["structures"].keys()
+    assert out["git_commit"] and out["host"]["cpu"]
+    summary = (out_dir / "bench" / "summary.md").read_text()
+    assert "## bench: bunny-948" in summary and f"Measured by commit {out['git_commit']}" in summary
     if not EmbreeAccel.available():
         assert "embree" in out["unavailable"]
         pytest.skip("embreex is not installed: Embree assertions skipped")

@@ -77,8 +77,10 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     threads = set_threads(threads)
     rays = {"random": make_rays(scene, "random", n_rays, seed=seed),
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
+    from experiments.core.store import git_commit
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
-           "host": host_info(), "structures": {}, "unavailable": {}}
+           "git_commit": git_commit(), "host": host_info(), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+           "structures": {}, "unavailable": {}}
     for name in progress(names, f"bench {scene.name}", quiet=log is not print, unit="structure"):
         t0 = time.perf_counter()
         if name == "embree":
@@ -169,7 +171,7 @@ def main(ctx, args) -> int:
     log(f"bench {scene.name}: {scene.n:,} faces, {args.rays:,} rays per kind, threads={args.threads or 'all'}")
     out = run_bench(scene, names, args.rays, max(1, args.repeats), args.threads, args.trimesh_rays, args.seed, log)
     write_json(f"{args.out}/bench/{scene.name}-t{out['threads']}.json", out)
-    atomic_write(f"{args.out}/bench/summary.md", _summary(out))
+    atomic_write(f"{args.out}/bench/summary.md", _summary_all(f"{args.out}/bench"))
     if args.json:
         emit_json(out)
     else:
@@ -178,6 +180,23 @@ def main(ctx, args) -> int:
         for k, v in out["unavailable"].items():
             print(f"  unavailable {k}: {v}", file=sys.stderr)
     return 0
+
+
+def _summary_all(folder) -> str:
+    """summary.md of every bench file in ``folder`` (one section per scene and thread count), each
+    naming the commit, host and time that measured it."""
+    import json
+    from pathlib import Path
+    parts = ["# bench: every scene benched into this folder", "",
+             "Each section is one `gridcost bench` run; its commit, host and finish time are under its title."]
+    for f in sorted(Path(folder).glob("*-t*.json")):
+        out = json.loads(f.read_text())
+        sec = _summary(out).replace("# bench:", "## bench:", 1).split("\n")
+        host = out.get("host") or {}
+        sec.insert(1, f"\nMeasured by commit {out.get('git_commit', 'unknown (before bench recorded it)')} on "
+                      f"{host.get('host', '?')} ({host.get('cpu', '?')}), finished {out.get('finished', '?')}.")
+        parts += [""] + sec
+    return "\n".join(parts).rstrip("\n") + "\n"
 
 
 def _summary(out: dict) -> str:

@@ -65,8 +65,9 @@ def main(ctx, args) -> int:
 def _many(args, kinds, structure: str) -> int:
     from pathlib import Path
 
-    from experiments.core.store import atomic_write, write_json
+    from experiments.core.store import atomic_write, git_commit, write_json
     from tracer.scene import load_scene
+    from tracer.timing import host_info
     outs = []
     for name in progress(args.scene.split(","), f"verify {args.structure}", quiet=getattr(args, "json", False)):
         t0 = time.perf_counter()
@@ -78,6 +79,7 @@ def _many(args, kinds, structure: str) -> int:
                   f"ties {out['ties']}  ({out['seconds']:.0f} s)", flush=True)
     total = {"structure": structure, "rays": sum(o["rays"] for o in outs),
              "disagreements": sum(o["disagreements"] for o in outs), "ties": sum(o["ties"] for o in outs),
+             "git_commit": git_commit(), "host": host_info(), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
              "scenes": outs}
     d = Path(args.out) / "verify"
     params = parse_params(args.param)
@@ -85,7 +87,8 @@ def _many(args, kinds, structure: str) -> int:
     write_json(d / f"{tag}.json", total)
     lines = [f"# Oracle agreement: {structure} {params or ''}", "",
              f"Every ray traced with `{structure}` and with the float64 brute-force oracle; ray kinds: "
-             f"{', '.join(kinds)}; {args.rays:,} rays per kind and scene (seed {args.seed}).", "",
+             f"{', '.join(kinds)}; {args.rays:,} rays per kind and scene (seed {args.seed}); commit "
+             f"{total['git_commit']} on {total['host'].get('host')} ({total['host'].get('cpu')}).", "",
              "| scene | faces | rays | hits | disagreements | ties | layout |", "|---|---|---|---|---|---|---|"]
     lines += [f"| {o['scene']} | {o['faces']:,} | {o['rays']:,} | {o['hits']:,} | {o['disagreements']} | {o['ties']} | "
               f"{o['stats'].get('layout', '–')} |" for o in outs]
