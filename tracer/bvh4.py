@@ -37,8 +37,8 @@ from numba import prange
 
 from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import Accel
-from tracer.bvh import BVH, BVH_TRAV_COST, T_EPS, _box
-from tracer.geometry import INF, ray_triangle
+from tracer.bvh import BVH, BVH_TRAV_COST, ray_start
+from tracer.geometry import INF, ray_triangle, t_tolerance
 from tracer.memory import working_set
 
 #: int32 words per 4-wide node: 24 box words (SoA float32), 4 refs, 4 counts
@@ -169,27 +169,14 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
     t4 = np.empty(4, np.float32)
     tmin32 = np.float32(tmin)
     for i in range(lo, hi):
-        px = np.float64(O[i, 0])
-        py = np.float64(O[i, 1])
-        pz = np.float64(O[i, 2])
-        dx = np.float64(D[i, 0])
-        dy = np.float64(D[i, 1])
-        dz = np.float64(D[i, 2])
-        ix = 1.0 / dx
-        iy = 1.0 / dy
-        iz = 1.0 / dz
-        best = np.float64(tmax[i])
+        px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
         best_id = -1
         nvis = 0
         leaves = 0
         tests = 0
-        sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
-        sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
-        sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
-        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, best)
         in_box = t0 <= t1
         if in_box:
-            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
             # float32 copies of the ray for the box tests (see the module docstring)
             ox = O[i, 0]
             oy = O[i, 1]
