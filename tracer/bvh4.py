@@ -31,12 +31,11 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 from numba import prange
 
 from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
-from tracer.accel import Accel
+from tracer.accel import Accel, TreeTraceMixin
 from tracer.bvh import BVH, BVH_TRAV_COST, ray_start
 from tracer.geometry import INF, ray_triangle, t_tolerance
 from tracer.memory import working_set
@@ -283,9 +282,11 @@ def bvh4_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size,
                        tv, ids, stack_size, out_t, out_id, counters)
 
 
-class BVH4(Accel):
+class BVH4(TreeTraceMixin, Accel):
     """4-wide BVH collapsed from :class:`tracer.bvh.BVH`; parameters as the binary BVH's: ``bins``
     (32), ``max_leaf`` triangles per leaf (4), ``trav_cost`` (pbrt-v2: 1/8)."""
+
+    _kernel = staticmethod(bvh4_trace)
 
     name = "bvh4"
 
@@ -312,16 +313,9 @@ class BVH4(Accel):
         self.build_seconds_ = time.perf_counter() - t_start
         return self
 
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        out_t, out_id, cnt = self._outputs(len(o), count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        bvh4_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                   self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, 3 * self.depth_ + 8,
-                   out_t, out_id, cnt, numba.get_num_threads())
-        return out_t, out_id, cnt
+    def _stack_size(self) -> int:
+        """Up to three pushed children per level (four hit, the nearest visited), and a margin."""
+        return 3 * self.depth_ + 8
 
     def stats(self) -> dict:
         nn = len(self.nodes_)
