@@ -202,31 +202,26 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
 
 # ---------------------------------------------------------------- traversal
 @jit(inline="always")
+def _slab_narrow(nf, near, far, o, inv, tn, tf):
+    """[tn, tf] narrowed to the slab between the planes ``nf[near]`` and ``nf[far]`` of one axis
+    (float64); a NaN product is ignored."""
+    a = (np.float64(nf[near]) - o) * inv
+    if a > tn:
+        tn = a
+    a = (np.float64(nf[far]) - o) * inv
+    if a < tf:
+        tf = a
+    return tn, tf
+
+
+@jit(inline="always")
 def _box(nf, base, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim):
     """Slab test of the node box at ``nf[base:base + 6]`` in float64 (``s*``: 0 or 3, which face is
     near on each axis). NaN products (origin on a slab plane, zero direction) are ignored, i.e.
     count as inside. Returns (t_enter, t_leave)."""
-    tn = tmin
-    tf = tlim
-    a = (np.float64(nf[base + sx]) - ox) * ix
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(3) - sx)]) - ox) * ix
-    if a < tf:
-        tf = a
-    a = (np.float64(nf[base + np.uintp(1) + sy]) - oy) * iy
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(4) - sy)]) - oy) * iy
-    if a < tf:
-        tf = a
-    a = (np.float64(nf[base + np.uintp(2) + sz]) - oz) * iz
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(5) - sz)]) - oz) * iz
-    if a < tf:
-        tf = a
-    return tn, tf
+    tn, tf = _slab_narrow(nf, base + sx, base + (np.uintp(3) - sx), ox, ix, tmin, tlim)
+    tn, tf = _slab_narrow(nf, base + np.uintp(1) + sy, base + (np.uintp(4) - sy), oy, iy, tn, tf)
+    return _slab_narrow(nf, base + np.uintp(2) + sz, base + (np.uintp(5) - sz), oz, iz, tn, tf)
 
 
 @jit(inline="always")
