@@ -108,7 +108,12 @@ class Accel:
 
 class TreeTraceMixin:
     """``_trace`` shared by the hierarchies (kd-tree, BVH): same flat arrays, same kernel signature;
-    a subclass sets ``_kernel = staticmethod(<its Numba kernel>)``."""
+    a subclass sets ``_kernel = staticmethod(<its Numba kernel>)`` and, when its traversal stack
+    holds more than one entry per level, ``_stack_size``."""
+
+    def _stack_size(self) -> int:
+        """Entries of the per-block traversal stack: one per level of the tree, and a margin."""
+        return self.depth_ + 2
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         out_t, out_id, cnt = self._outputs(len(o), count)
@@ -117,7 +122,7 @@ class TreeTraceMixin:
             out_id[:] = -1
             return out_t, out_id, cnt
         self._kernel(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                     self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self.depth_ + 2,
+                     self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self._stack_size(),
                      out_t, out_id, cnt, numba.get_num_threads())
         return out_t, out_id, cnt
 

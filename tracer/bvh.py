@@ -36,12 +36,10 @@ from numba import prange
 from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
-from tracer.geometry import INF, ray_triangle
+from tracer.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.kdtree import root_box
 from tracer.memory import check_budget, working_set
 
-#: relative widening of box/hit comparisons (of the ray's t scale), as in tracer.kdtree
-T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 #: pbrt-v2 BVHAccel SAH weights: traversal 1/8 of a triangle test
 BVH_TRAV_COST = 0.125
@@ -204,31 +202,41 @@ def bvh_build(pb, pc, nbins, max_leaf, trav_cost):
 
 # ---------------------------------------------------------------- traversal
 @jit(inline="always")
+def _slab_narrow(nf, near, far, o, inv, tn, tf):
+    """[tn, tf] narrowed to the slab between the planes ``nf[near]`` and ``nf[far]`` of one axis
+    (float64); a NaN product is ignored."""
+    a = (np.float64(nf[near]) - o) * inv
+    if a > tn:
+        tn = a
+    a = (np.float64(nf[far]) - o) * inv
+    if a < tf:
+        tf = a
+    return tn, tf
+
+
+@jit(inline="always")
 def _box(nf, base, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim):
     """Slab test of the node box at ``nf[base:base + 6]`` in float64 (``s*``: 0 or 3, which face is
     near on each axis). NaN products (origin on a slab plane, zero direction) are ignored, i.e.
     count as inside. Returns (t_enter, t_leave)."""
-    tn = tmin
-    tf = tlim
-    a = (np.float64(nf[base + sx]) - ox) * ix
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(3) - sx)]) - ox) * ix
-    if a < tf:
-        tf = a
-    a = (np.float64(nf[base + np.uintp(1) + sy]) - oy) * iy
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(4) - sy)]) - oy) * iy
-    if a < tf:
-        tf = a
-    a = (np.float64(nf[base + np.uintp(2) + sz]) - oz) * iz
-    if a > tn:
-        tn = a
-    a = (np.float64(nf[base + (np.uintp(5) - sz)]) - oz) * iz
-    if a < tf:
-        tf = a
-    return tn, tf
+    tn, tf = _slab_narrow(nf, base + sx, base + (np.uintp(3) - sx), ox, ix, tmin, tlim)
+    tn, tf = _slab_narrow(nf, base + np.uintp(1) + sy, base + (np.uintp(4) - sy), oy, iy, tn, tf)
+    return _slab_narrow(nf, base + np.uintp(2) + sz, base + (np.uintp(5) - sz), oz, iz, tn, tf)
+
+
+@jit(inline="always")
+def ray_start(O, D, i, box, tmin, tmax):
+    """Ray ``i`` (:func:`tracer.geometry.load_ray`), the near face of each axis (``s*``: 0 or 3,
+    :func:`_box`), its limit ``tmax[i]`` as float64 and [t0, t1] in the padded root box ``box``
+    (a miss when t0 > t1; the finite range sets ``tol``): (ox, oy, oz, dx, dy, dz, ix, iy, iz,
+    sx, sy, sz, tmax, t0, t1)."""
+    ox, oy, oz, dx, dy, dz, ix, iy, iz = load_ray(O, D, i)
+    sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
+    sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
+    sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
+    tlim = np.float64(tmax[i])
+    t0, t1 = _box(box, np.uintp(0), ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tlim)
+    return ox, oy, oz, dx, dy, dz, ix, iy, iz, sx, sy, sz, tlim, t0, t1
 
 
 @jit
@@ -241,30 +249,14 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
     six = np.uintp(6)
     seven = np.uintp(7)
     for i in range(lo, hi):
-        # the ray exactly as the grid and the oracle pass it to ray_triangle (and use it for the
-        # boxes): widened with np.float64, as Numba's float() keeps a float32 a float32
-        px = np.float64(O[i, 0])
-        py = np.float64(O[i, 1])
-        pz = np.float64(O[i, 2])
-        dx = np.float64(D[i, 0])
-        dy = np.float64(D[i, 1])
-        dz = np.float64(D[i, 2])
-        ix = 1.0 / dx
-        iy = 1.0 / dy
-        iz = 1.0 / dz
-        best = np.float64(tmax[i])
+        px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
         best_id = -1
         nvis = 0
         leaves = 0
         tests = 0
-        sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
-        sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
-        sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
-        # robust miss test against the padded root box (finite t-range for tol)
-        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, best)
         in_box = t0 <= t1
         if in_box:
-            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
             sp = 0
             node = 0
             while True:
@@ -274,6 +266,8 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
                 if cnt > 0:
                     leaves += 1
                     off = ni[base + six]
+                    # written out here and in bvh4_chunk: as an inline helper returning (best,
+                    # best_id, tests, done) this kernel measured 2-3 % slower (bunny-69k, 1 thread)
                     done = False
                     for rr in range(off, off + cnt):
                         r = np.uintp(rr)

@@ -32,14 +32,13 @@ from __future__ import annotations
 
 import time
 
-import numba
 import numpy as np
 from numba import prange
 
 from tracer._jit import BLOCK, jit, nblocks, pjit, store_ray
-from tracer.accel import Accel
-from tracer.bvh import BVH, BVH_TRAV_COST, T_EPS, _box
-from tracer.geometry import INF, ray_triangle
+from tracer.accel import Accel, TreeTraceMixin
+from tracer.bvh import BVH, BVH_TRAV_COST, ray_start
+from tracer.geometry import INF, ray_triangle, t_tolerance
 from tracer.memory import working_set
 from tracer.simd import slab4
 
@@ -158,27 +157,14 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
     t4 = np.empty(4, np.float32)
     tmin32 = np.float32(tmin)
     for i in range(lo, hi):
-        px = np.float64(O[i, 0])
-        py = np.float64(O[i, 1])
-        pz = np.float64(O[i, 2])
-        dx = np.float64(D[i, 0])
-        dy = np.float64(D[i, 1])
-        dz = np.float64(D[i, 2])
-        ix = 1.0 / dx
-        iy = 1.0 / dy
-        iz = 1.0 / dz
-        best = np.float64(tmax[i])
+        px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
         best_id = -1
         nvis = 0
         leaves = 0
         tests = 0
-        sx = np.uintp(0) if ix >= 0.0 else np.uintp(3)
-        sy = np.uintp(0) if iy >= 0.0 else np.uintp(3)
-        sz = np.uintp(0) if iz >= 0.0 else np.uintp(3)
-        t0, t1 = _box(box, np.uintp(0), px, py, pz, ix, iy, iz, sx, sy, sz, tmin, best)
         in_box = t0 <= t1
         if in_box:
-            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
             # float32 copies of the ray for the box tests (see the module docstring)
             ox = O[i, 0]
             oy = O[i, 1]
@@ -279,9 +265,11 @@ def bvh4_trace(O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stack_size,
                        tv, ids, stack_size, out_t, out_id, counters)
 
 
-class BVH4(Accel):
+class BVH4(TreeTraceMixin, Accel):
     """4-wide BVH collapsed from :class:`tracer.bvh.BVH`; parameters as the binary BVH's: ``bins``
     (32), ``max_leaf`` triangles per leaf (4), ``trav_cost`` (pbrt-v2: 1/8)."""
+
+    _kernel = staticmethod(bvh4_trace)
 
     name = "bvh4"
 
@@ -308,16 +296,9 @@ class BVH4(Accel):
         self.build_seconds_ = time.perf_counter() - t_start
         return self
 
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        out_t, out_id, cnt = self._outputs(len(o), count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        bvh4_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                   self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, 3 * self.depth_ + 8,
-                   out_t, out_id, cnt, numba.get_num_threads())
-        return out_t, out_id, cnt
+    def _stack_size(self) -> int:
+        """Up to three pushed children per level (four hit, the nearest visited), and a margin."""
+        return 3 * self.depth_ + 8
 
     def stats(self) -> dict:
         nn = len(self.nodes_)

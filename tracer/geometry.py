@@ -66,6 +66,32 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
     return INF
 
 
+#: relative widening of node t-ranges (of the ray's t scale) in the hierarchies' traversal
+#: comparisons; covers the rounding of plane distances and of ray_triangle's edge test
+T_EPS = 2e-6
+
+
+@jit(inline="always")
+def load_ray(O, D, i):
+    """Ray ``i`` exactly as the grid and the oracle pass it to :func:`ray_triangle` (widened with
+    np.float64, as Numba's float() keeps a float32 a float32) and its inverse direction (1 / 0 is
+    inf under the kernels' numpy error model): (ox, oy, oz, dx, dy, dz, ix, iy, iz)."""
+    ox = np.float64(O[i, 0])
+    oy = np.float64(O[i, 1])
+    oz = np.float64(O[i, 2])
+    dx = np.float64(D[i, 0])
+    dy = np.float64(D[i, 1])
+    dz = np.float64(D[i, 2])
+    return ox, oy, oz, dx, dy, dz, 1.0 / dx, 1.0 / dy, 1.0 / dz
+
+
+@jit(inline="always")
+def t_tolerance(t0, t1, diag, ix, iy, iz):
+    """The hierarchies' ``tol``: T_EPS of the ray's t scale, |t| at the root box [t0, t1] plus the
+    t-length of the scene (diag / max|d_k| >= diag / |d|, conservatively)."""
+    return T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+
+
 @jit(inline="always")
 def _slab(o, d, lo, hi):
     """One axis of the slab test; a zero direction gives (-inf, inf) inside the slab, empty outside."""

@@ -70,14 +70,11 @@ from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
 from tracer.errors import GridcostError
-from tracer.geometry import INF, ray_triangle
+from tracer.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.kdtree_clip import kd_build_clip
 from tracer.memory import check_budget, working_set
 
-#: relative widening of node t-ranges (of the ray's t scale) in traversal comparisons; covers the
-#: rounding of plane distances and of ray_triangle's edge test (hits on a triangle's very edge)
-T_EPS = 2e-6
 NCOUNT = len(COUNTER_NAMES)
 
 
@@ -136,30 +133,19 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
     bz1 = box[5]
     one = np.uintp(1)
     for i in range(lo, hi):
-        # the ray exactly as the grid and the oracle pass it to ray_triangle: widened to float64
-        # with np.float64 (Numba's float() keeps a float32 a float32), tv entries as float32
-        ox = np.float64(O[i, 0])
-        oy = np.float64(O[i, 1])
-        oz = np.float64(O[i, 2])
-        dx = np.float64(D[i, 0])
-        dy = np.float64(D[i, 1])
-        dz = np.float64(D[i, 2])
+        ox, oy, oz, dx, dy, dz, ix, iy, iz = load_ray(O, D, i)
         best = np.float64(tmax[i])
         best_id = -1
         nvis = 0
         leaves = 0
         tests = 0
-        ix = 1.0 / dx
-        iy = 1.0 / dy
-        iz = 1.0 / dz
         # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
         t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, best)
         t0, t1 = _slab_clip(by0, by1, oy, iy, t0, t1)
         t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
         in_box = t0 <= t1
         if in_box:
-            # diag / max|d_k| >= diag / |d|: the t-length of the scene, conservatively
-            tol = T_EPS * (max(abs(t0), abs(t1)) + diag * min(abs(ix), abs(iy), abs(iz)))
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
             rs[0] = ox
             rs[1] = oy
             rs[2] = oz

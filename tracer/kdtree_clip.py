@@ -33,19 +33,12 @@ import numpy as np
 
 from tracer._jit import jit
 from tracer.geometry import INF
-from tracer.kdtree_build import LEAF, _area, _grow
+from tracer.kdtree_build import (_area, _grow, axis_extent, child_probs, close_leaf, leaf_verdict, open_node,
+                                 sah_split_cost, split_node, tree_arrays, tree_result)
 
 #: event types, in their sort order at equal positions (Wald & Havran: end < planar < start)
 EV_END, EV_PLANAR, EV_START = 0, 1, 2
 _LOW30 = (1 << 30) - 1
-
-
-@jit(inline="always")
-def sah_split_cost(trav_cost, isect_cost, empty_bonus, p_left, p_right, n_left, n_right):
-    """pbrt-v2's SAH of a split: C = C_trav + C_isect (1 - b) (P_L N_L + P_R N_R), with
-    b = ``empty_bonus`` when one side is empty, P = area(child) / area(node)."""
-    eb = empty_bonus if (n_left == 0 or n_right == 0) else 0.0
-    return trav_cost + isect_cost * (1.0 - eb) * (p_left * n_left + p_right * n_right)
 
 
 @jit(inline="always")
@@ -157,14 +150,9 @@ def _best_split(rb, base, n, bounds, keys, isect_cost, trav_cost, empty_bonus):
     best_pos = np.float32(0.0)
     best_pl = True
     for axis in range(3):
-        lo_a = bounds[axis]
-        hi_a = bounds[3 + axis]
+        lo_a, hi_a, cap_ab, sum_ab = axis_extent(bounds, axis)
         if not hi_a > lo_a:
             continue
-        da = bounds[3 + (axis + 1) % 3] - bounds[(axis + 1) % 3]
-        db = bounds[3 + (axis + 2) % 3] - bounds[(axis + 2) % 3]
-        cap_ab = da * db
-        sum_ab = da + db
         ne = 0
         for j in range(n):
             q = 6 * (base + j) + axis
@@ -199,8 +187,7 @@ def _best_split(rb, base, n, bounds, keys, isect_cost, trav_cost, empty_bonus):
             n_r -= p_p + p_e
             t = np.float64(p)
             if t > lo_a and t < hi_a:
-                p_below = 2.0 * (cap_ab + (t - lo_a) * sum_ab) * inv_total
-                p_above = 2.0 * (cap_ab + (hi_a - t) * sum_ab) * inv_total
+                p_below, p_above = child_probs(t, lo_a, hi_a, cap_ab, sum_ab, inv_total)
                 c_l = sah_split_cost(trav_cost, isect_cost, empty_bonus, p_below, p_above, n_l + p_p, n_r)
                 c_r = sah_split_cost(trav_cost, isect_cost, empty_bonus, p_below, p_above, n_l, n_r + p_p)
                 if c_l < best_cost:
@@ -209,6 +196,63 @@ def _best_split(rb, base, n, bounds, keys, isect_cost, trav_cost, empty_bonus):
                     best_cost, best_axis, best_pos, best_pl = c_r, axis, p, False
             n_l += p_s + p_p
     return best_cost, best_axis, best_pos, best_pl
+
+
+@jit
+def _clip_partition(tv, rid, rb, base, n, ba, tsplit, planar_left, bounds, poly, cb, cbox, ob):
+    """Classify a node's refs against ``tsplit`` on ``ba`` (see module doc), straddlers re-clipped
+    to each child box. The above child's refs end up compacted at ``base``, the below child's right
+    after them. Returns (rid, rb (grown when full), n below, n above)."""
+    # below child's refs go on top of the work area, the above child's are compacted in place
+    # (write index <= read index)
+    need = base + 2 * n
+    if need > rid.shape[0] or 6 * need > rb.shape[0]:
+        cap = max(need, rid.shape[0] * 3 // 2)
+        rid = _grow(rid, cap)
+        rb = _grow(rb, 6 * cap)
+    wl = base + n
+    wr = base
+    for j in range(base, base + n):
+        lo = rb[6 * j + ba]
+        hi = rb[6 * j + 3 + ba]
+        tri = rid[j]
+        if lo == hi and lo == tsplit:
+            left = planar_left
+            right = not planar_left
+        else:
+            left = lo < tsplit
+            right = hi > tsplit
+        if left and right:  # straddler: re-clip to each child box
+            for c in range(6):
+                cbox[c] = bounds[c]
+                ob[c] = rb[6 * j + c]
+            cbox[3 + ba] = tsplit
+            rid[wl] = tri
+            _child_bounds(tv, tri, ob, cbox, poly, cb, rb, wl)
+            wl += 1
+            cbox[3 + ba] = bounds[3 + ba]
+            cbox[ba] = tsplit
+            _child_bounds(tv, tri, ob, cbox, poly, cb, rb, wr)
+            rid[wr] = tri
+            wr += 1
+        elif left:
+            rid[wl] = tri
+            for c in range(6):
+                rb[6 * wl + c] = rb[6 * j + c]
+            wl += 1
+        else:
+            rid[wr] = tri
+            for c in range(6):
+                rb[6 * wr + c] = rb[6 * j + c]
+            wr += 1
+    n_lo = wl - (base + n)
+    n_hi = wr - base
+    # the below child's refs move down to base + n_hi.. so the work area stays compact
+    for j in range(n_lo):
+        rid[base + n_hi + j] = rid[base + n + j]
+        for c in range(6):
+            rb[6 * (base + n_hi + j) + c] = rb[6 * (base + n + j) + c]
+    return rid, rb, n_lo, n_hi
 
 
 @jit
@@ -232,47 +276,11 @@ def kd_build_clip(tv, n_prims, root, max_depth, max_prims, isect_cost, trav_cost
     cb = np.empty(6, np.float64)
     cbox = np.empty(6, np.float64)
     ob = np.empty(6, np.float32)
-    w0 = np.empty(max(16, 2 * n_prims), np.int32)
-    w1 = np.empty(max(16, 2 * n_prims), np.int32)
-    spl = np.empty(max(16, 2 * n_prims), np.float32)
-    leaf_ids = np.empty(max(16, 2 * n_prims), np.int32)
-    nnodes = 0
-    nrefs = 0
-    nleaves = 0
-    nempty = 0
-    depth_reached = 0
-    s_inner = 0.0
-    s_leaf = 0.0
-    s_tests = 0.0
-    ns = max_depth + 2
-    st_base = np.empty(ns, np.int64)
-    st_n = np.empty(ns, np.int64)
-    st_depth = np.empty(ns, np.int64)
-    st_bad = np.empty(ns, np.int64)
-    st_parent = np.empty(ns, np.int64)
-    st_bounds = np.empty((ns, 6), np.float64)
-    sp = 0
-    bounds = np.empty(6, np.float64)
-    for k in range(6):
-        bounds[k] = root[k]
-    root_area = _area(bounds)
-    base = 0
-    n = n_prims
-    depth = max_depth
-    bad = 0
-    parent = -1
-    while True:
-        node = nnodes
-        nnodes += 1
-        if nnodes > w0.shape[0]:
-            w0 = _grow(w0, nnodes)
-            w1 = _grow(w1, nnodes)
-            spl = _grow(spl, nnodes)
-        if parent >= 0:
-            w0[parent] |= node << 2
-        depth_reached = max(depth_reached, max_depth - depth)
-        area = _area(bounds)
-        make_leaf = n <= max_prims or depth == 0
+    w0, w1, spl, leaf_ids, ic, fs, st, st_bounds, bounds, root_area = tree_arrays(n_prims, max_depth, root)
+    sp = 1
+    while sp > 0:
+        w0, w1, spl, sp, node, base, n, depth, bad, area, make_leaf = open_node(
+            w0, w1, spl, ic, st, st_bounds, sp, bounds, max_depth, max_prims)
         ba = -1
         tsplit = np.float32(0.0)
         planar_left = True
@@ -281,102 +289,13 @@ def kd_build_clip(tv, n_prims, root, max_depth, max_prims, isect_cost, trav_cost
                 keys = np.empty(2 * n, np.uint64)
             best_cost, ba, tsplit, planar_left = _best_split(rb, base, n, bounds, keys, isect_cost,
                                                              trav_cost, empty_bonus)
-            old_cost = isect_cost * n
-            if best_cost > old_cost:
-                bad += 1
-            if (best_cost > 4.0 * old_cost and n < 16) or ba == -1 or bad == 3:
-                make_leaf = True
+            bad, make_leaf = leaf_verdict(best_cost, ba, n, bad, isect_cost)
         if make_leaf:
-            leaf_ids = _grow(leaf_ids, nrefs + n)
-            off = nrefs
-            for j in range(base, base + n):
-                leaf_ids[nrefs] = rid[j]
-                nrefs += 1
-            w0[node] = LEAF | (n << 2)
-            w1[node] = off
-            spl[node] = 0.0
-            nleaves += 1
-            if n == 0:
-                nempty += 1
-            s_leaf += area
-            s_tests += area * n
-            if sp == 0:
-                break
-            sp -= 1
-            base = st_base[sp]
-            n = st_n[sp]
-            depth = st_depth[sp]
-            bad = st_bad[sp]
-            parent = st_parent[sp]
-            for k in range(6):
-                bounds[k] = st_bounds[sp, k]
+            leaf_ids, off = close_leaf(w0, w1, spl, leaf_ids, ic, fs, node, n, area)
+            leaf_ids[off:off + n] = rid[base:base + n]
             continue
-        s_inner += area
-        # below child's refs go on top of the work area (built next), the above child's are
-        # compacted in place (write index <= read index) and wait on the stack
-        need = base + 2 * n
-        if need > cap:
-            cap = max(need, cap * 3 // 2)
-            rid = _grow(rid, cap)
-            rb = _grow(rb, 6 * cap)
-        wl = base + n
-        wr = base
-        for j in range(base, base + n):
-            lo = rb[6 * j + ba]
-            hi = rb[6 * j + 3 + ba]
-            tri = rid[j]
-            if lo == hi and lo == tsplit:
-                left = planar_left
-                right = not planar_left
-            else:
-                left = lo < tsplit
-                right = hi > tsplit
-            if left and right:  # straddler: re-clip to each child box
-                for c in range(6):
-                    cbox[c] = bounds[c]
-                    ob[c] = rb[6 * j + c]
-                cbox[3 + ba] = tsplit
-                rid[wl] = tri
-                _child_bounds(tv, tri, ob, cbox, poly, cb, rb, wl)
-                wl += 1
-                cbox[3 + ba] = bounds[3 + ba]
-                cbox[ba] = tsplit
-                _child_bounds(tv, tri, ob, cbox, poly, cb, rb, wr)
-                rid[wr] = tri
-                wr += 1
-            elif left:
-                rid[wl] = tri
-                for c in range(6):
-                    rb[6 * wl + c] = rb[6 * j + c]
-                wl += 1
-            else:
-                rid[wr] = tri
-                for c in range(6):
-                    rb[6 * wr + c] = rb[6 * j + c]
-                wr += 1
-        n_lo = wl - (base + n)
-        n_hi = wr - base
-        w0[node] = ba
-        w1[node] = 0
-        spl[node] = tsplit
-        st_base[sp] = base
-        st_n[sp] = n_hi
-        st_depth[sp] = depth - 1
-        st_bad[sp] = bad
-        st_parent[sp] = node
-        for k in range(6):
-            st_bounds[sp, k] = bounds[k]
-        st_bounds[sp, ba] = tsplit
-        sp += 1
-        # the below child's refs move down to base + n_hi.. so the work area stays compact
-        for j in range(n_lo):
-            rid[base + n_hi + j] = rid[base + n + j]
-            for c in range(6):
-                rb[6 * (base + n_hi + j) + c] = rb[6 * (base + n + j) + c]
-        base = base + n_hi
-        n = n_lo
-        depth -= 1
-        parent = -1
-        bounds[3 + ba] = tsplit
-    return (w0[:nnodes].copy(), w1[:nnodes].copy(), spl[:nnodes].copy(), leaf_ids[:nrefs].copy(),
-            nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area)
+        rid, rb, n_lo, n_hi = _clip_partition(tv, rid, rb, base, n, ba, tsplit, planar_left, bounds,
+                                              poly, cb, cbox, ob)
+        sp = split_node(w0, w1, spl, fs, st, st_bounds, sp, node, ba, tsplit, bounds, area, base + n_hi,
+                        n_lo, base, n_hi, depth, bad)
+    return tree_result(w0, w1, spl, leaf_ids, ic, fs, root_area)

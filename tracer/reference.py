@@ -2,12 +2,22 @@
 ``gridcost[embree]``) and trimesh's pure-Python/numpy ``ray_triangle``. No counters."""
 from __future__ import annotations
 
+import importlib
 import time
 
 import numpy as np
 
 from tracer.accel import Accel
 from tracer.errors import GridcostError
+
+
+def _importable(module: str) -> bool:
+    """Whether ``module`` imports (an optional extra is installed)."""
+    try:
+        importlib.import_module(module)
+        return True
+    except ImportError:
+        return False
 
 
 class EmbreeAccel(Accel):
@@ -21,11 +31,7 @@ class EmbreeAccel(Accel):
 
     @staticmethod
     def available() -> bool:
-        try:
-            import embreex.rtcore_scene  # noqa: F401
-            return True
-        except ImportError:
-            return False
+        return _importable("embreex.rtcore_scene")
 
     def build(self, scene):
         try:
@@ -67,11 +73,7 @@ class TrimeshAccel(Accel):
     @staticmethod
     def available() -> bool:
         """trimesh's ray tracer needs rtree."""
-        try:
-            import rtree  # noqa: F401
-            return True
-        except ImportError:
-            return False
+        return _importable("rtree")
 
     def build(self, scene):
         import trimesh

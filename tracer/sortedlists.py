@@ -294,6 +294,20 @@ def _treat(st, s, isin, pend, npend):
 
 
 @jit(inline="always")
+def _heap_before(t, isin, t2, isin2):
+    """The heap order of keys (t, isin): smaller t first, IN before OUT at equal t."""
+    return (t < t2) | ((t == t2) & (isin > isin2))
+
+
+@jit(inline="always")
+def _heap_put(hp, h_t, h_in, i, c, t, isin):
+    """Store cursor ``c`` with key (t, isin) in heap slot ``i``."""
+    hp[i] = c
+    h_t[i] = t
+    h_in[i] = isin
+
+
+@jit(inline="always")
 def _heap_push(hp, h_t, h_in, n, c, t, isin):
     """Insert cursor ``c`` with key (t, IN first) into the heap hp[0:n] (keys h_t, h_in kept in
     heap order beside it). Returns the new size."""
@@ -301,16 +315,12 @@ def _heap_push(hp, h_t, h_in, n, c, t, isin):
     while i > 0:
         p = (i - 1) >> 1
         tp = h_t[p]
-        if (t < tp) | ((t == tp) & (isin > h_in[p])):
-            hp[i] = hp[p]
-            h_t[i] = tp
-            h_in[i] = h_in[p]
+        if _heap_before(t, isin, tp, h_in[p]):
+            _heap_put(hp, h_t, h_in, i, hp[p], tp, h_in[p])
             i = p
         else:
             break
-    hp[i] = c
-    h_t[i] = t
-    h_in[i] = isin
+    _heap_put(hp, h_t, h_in, i, c, t, isin)
     return n + 1
 
 
@@ -327,20 +337,16 @@ def _heap_down(hp, h_t, h_in, n, c, t, isin):
         if m + 1 < n:
             t2 = h_t[m + 1]
             i2 = h_in[m + 1]
-            if (t2 < tm) | ((t2 == tm) & (i2 > im)):
+            if _heap_before(t2, i2, tm, im):
                 m += 1
                 tm = t2
                 im = i2
-        if (tm < t) | ((tm == t) & (im > isin)):
-            hp[i] = hp[m]
-            h_t[i] = tm
-            h_in[i] = im
+        if _heap_before(tm, im, t, isin):
+            _heap_put(hp, h_t, h_in, i, hp[m], tm, im)
             i = m
         else:
             break
-    hp[i] = c
-    h_t[i] = t
-    h_in[i] = isin
+    _heap_put(hp, h_t, h_in, i, c, t, isin)
 
 
 @jit(inline="always")
