@@ -42,7 +42,10 @@ def log_scale(ax, axis: str, values) -> bool:
     import numpy as np
     v = np.asarray(values, dtype=float).ravel()
     if (np.isfinite(v) & (v > 0)).any():
+        from matplotlib.ticker import LogLocator
         (ax.set_xscale if axis == "x" else ax.set_yscale)("log")
+        # minor ticks at 2 and 5 only: a panel spanning many decades otherwise lays out 8 per decade
+        (ax.xaxis if axis == "x" else ax.yaxis).set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
         return True
     ax.text(0.5, 0.5, "no positive values to draw on a log scale", transform=ax.transAxes, ha="center",
             va="center", fontsize=8, color="gray")

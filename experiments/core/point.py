@@ -14,7 +14,7 @@ from tracer.timing import MIN_SAMPLE_SECONDS, clock_name, time_paired
 REFERENCE = ("grid", {"factor": 8.0})
 
 #: --quick runs (CI, first contact) take shorter timing samples than MIN_SAMPLE_SECONDS
-QUICK_MIN_SAMPLE = 0.005
+QUICK_MIN_SAMPLE = 0.002
 
 
 def reference(scene):

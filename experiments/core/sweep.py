@@ -112,9 +112,12 @@ PAIRED_ROUNDS, PAIRED_REPEATS = 11, 5
 QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS = 3, 3
 
 
-def _paired_budget(quick: bool) -> tuple[int, int]:
-    """(rounds, repeats per round) of side-by-side timing."""
-    return (QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS) if quick else (PAIRED_ROUNDS, PAIRED_REPEATS)
+def _paired_budget(quick: bool) -> tuple[int, int, dict]:
+    """(rounds, repeats per round, the key's extra timing settings) of side-by-side timing; --quick
+    also takes shorter samples (QUICK_MIN_SAMPLE)."""
+    if quick:
+        return QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS, {"min_sample": QUICK_MIN_SAMPLE}
+    return PAIRED_ROUNDS, PAIRED_REPEATS, {}
 
 
 def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict], rays, store: PointStore,
@@ -130,18 +133,19 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
     from tracer.timing import paired_ratio
-    rounds, repeats = _paired_budget(quick)
+    rounds, repeats, timing = _paired_budget(quick)
     points = []
     for p in list(targets.values()) + list(candidates):
         if p not in points:
             points.append(p)
     spec = {"paired": 1, "scene": scene.name, "N": scene.n, "structure": structure, "targets": targets,
             "points": points, "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats,
-            **({"others": others} if others else {})}
+            **timing, **({"others": others} if others else {})}
     done = store.get(spec)
     if done is not None:
         return done
-    tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others)
+    tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others,
+                    timing.get("min_sample"))
     med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
     best = min(med, key=med.get)
     out = {}
@@ -167,15 +171,17 @@ def _run(store: PointStore, fn, *args):
     return store.ctx.run_task(store, fn, *args)
 
 
-def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None) -> dict:
+def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None, min_sample=None) -> dict:
     """Build every point (index -> structure) and each of ``others`` (name -> (structure, params)),
-    then time them all in interleaved rounds: index or name -> per-round seconds."""
-    from tracer.timing import time_paired
+    then time them all in interleaved rounds: index or name -> per-round seconds (samples of at
+    least ``min_sample`` seconds; None: the default)."""
+    from tracer.timing import MIN_SAMPLE_SECONDS, time_paired
     accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
     for name, (st, p) in (others or {}).items():
         accels[name] = build(scene, st, **p)
     return time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
-                        for i, a in accels.items()}, rounds=rounds, repeats=repeats)
+                        for i, a in accels.items()}, rounds=rounds, repeats=repeats,
+                       min_sample=MIN_SAMPLE_SECONDS if min_sample is None else min_sample)
 
 
 def paired_plane(scene, structure: str, points: list[dict], rays, store: PointStore, quick: bool = False) -> np.ndarray:
@@ -184,12 +190,13 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
     fastest, then the median over rounds. Drift between rounds cancels, and the points are compared
     directly rather than through the reference each sweep point is timed beside. Stored in ``store``
     (resumable)."""
-    rounds, repeats = _paired_budget(quick)
+    rounds, repeats, timing = _paired_budget(quick)
     spec = {"paired_plane": 1, "scene": scene.name, "N": scene.n, "structure": structure, "points": points,
-            "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats}
+            "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats, **timing}
     done = store.get(spec)
     if done is None:
-        tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats)
+        tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, None,
+                        timing.get("min_sample"))
         t = np.array([tp[i] for i in range(len(points))])  # (points, rounds)
         done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()},
                          provenance=prov)

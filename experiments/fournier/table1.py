@@ -70,7 +70,7 @@ def add_arguments(p) -> None:
     p.add_argument("--leaf-size", type=int, default=8, help="sorted-list hierarchy: objects per leaf BV")
     p.add_argument("--branching", type=int, default=2, help="sorted-list hierarchy: grid cells per axis per level")
     p.add_argument("--around-res", type=int, default=None,
-                   help="image side of the Around Again primary rays (default 128; --quick 32; 0 skips the scene)")
+                   help="image side of the Around Again primary rays (default 128; --quick 24; 0 skips the scene)")
 
 
 def _structure(kind, args):
@@ -203,7 +203,7 @@ def run(ctx, args, log=print) -> dict:
     res = args.res or (32 if quick else 128)
     repeats = args.repeats or (1 if quick else 3)
     flat_max = args.flat_max or (5000 if quick else 40000)
-    around_res = (32 if quick else 128) if args.around_res is None else args.around_res
+    around_res = (24 if quick else 128) if args.around_res is None else args.around_res
     out_dir = Path(args.out) / TARGET
     rows = []
     store = ctx.store(code=CODE)

@@ -22,7 +22,7 @@ PAPER = [
     ("capped-cylinder-3996", 3996, 768337, 2020822, 3, 1.7, 63),
     ("capped-cylinder-19996", 19996, 6591676, 22620629, 10, 2.0, 141),
 ]
-QUICK_SCENES = ["capped-cylinder-196", "capped-cylinder-3996"]
+QUICK_SCENES = ["capped-cylinder-196", "capped-cylinder-996"]
 KINDS = ("random", "camera")
 
 

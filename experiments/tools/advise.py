@@ -41,7 +41,7 @@ CAL_CFG = {"rays": 3000, "repeats": 3, "grid_factor": 1.0, "seed": 0, "samples":
            "hiers": ["kdtree", "bvh"]}
 #: --quick: the six smallest, fewer rays (a first look, the tests)
 QUICK_CALIBRATION = ["cornell", "boxes-44", "bunny-948", "cylinder-196", "particles-2000", "teapot"]
-QUICK_CAL_CFG = dict(CAL_CFG, rays=1000, repeats=2, samples=[300, 1000])
+QUICK_CAL_CFG = dict(CAL_CFG, rays=2000, samples=[100, 300, 1000])  # = table1h --quick: `all --quick` reuses its points
 #: rays traced by the probes and by --check
 PROBE_RAYS, CHECK_RAYS = 20_000, 200_000
 #: relative half-width floor of a probed interval (single-pass timings of a shared machine)
@@ -108,7 +108,7 @@ def probe_rays(scene, kind: str, seed: int):
     return Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed)
 
 
-def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
+def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN_SAMPLE_S) -> list[dict]:
     """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
     (independent of R: :func:`with_totals` adds the totals). The grids, and each hierarchy whose
     build the calibration estimates at most PROBE_BUILD_MAX_S (cheap next to any budget worth
@@ -133,7 +133,8 @@ def predict(scene, kind, cal, seed, log=lambda *a: None) -> list[dict]:
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
-    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], rays, repeats=5, build_repeats=None)
+    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], rays, repeats=5, build_repeats=None,
+                          min_sample=min_sample)
     for structure, params, how in probed:
         g = got[structure]
         hb, hr = max(PROBE_FLOOR, g["build_spread"] / 2), max(PROBE_FLOOR, g["ray_spread"] / 2)
@@ -155,7 +156,8 @@ def with_totals(cands: list[dict], R: float) -> list[dict]:
     return sorted(out, key=lambda c: c["predicted_s"])
 
 
-def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: int | None = 5) -> dict:
+def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: int | None = 5,
+                    min_sample: float = MIN_SAMPLE_S) -> dict:
     """Build and time ``structures`` [(structure, params), …] on ``rays``: build seconds = median of
     ``build_repeats`` builds after a warm-up (wall clock; None: 3 builds when one takes under
     PROBE_REBUILD_S, else 1), per-ray seconds = median over ``repeats`` interleaved rounds of tracing
@@ -179,7 +181,7 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
             ts.append(build_clock() - t0)
         builds[structure] = np.asarray(ts)
     tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
-                     rounds=max(1, repeats), repeats=1, min_sample=MIN_SAMPLE_S)
+                     rounds=max(1, repeats), repeats=1, min_sample=min_sample)
     out = {}
     for k in accs:
         b, t = builds[k], np.asarray(tm[k])
@@ -189,11 +191,13 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
     return out
 
 
-def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0) -> dict:
+def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0,
+            min_sample: float = MIN_SAMPLE_S) -> dict:
     """The measured truth of ``structures`` on ``n_rays`` fresh rays of ``kind`` (seed + 1: other
     rays than the probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
     from tracer.rays import make_rays
-    return time_structures(scene, structures, make_rays(scene, kind, int(n_rays), seed=seed + 1), repeats, repeats)
+    return time_structures(scene, structures, make_rays(scene, kind, int(n_rays), seed=seed + 1), repeats, repeats,
+                           min_sample)
 
 
 def _check(scene, kind, R, cands, seed) -> None:

@@ -49,10 +49,16 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def check_scene(scene, kind: str, cal, n_rays: int, repeats: int, seed: int) -> tuple[list[dict], list[dict]]:
+#: --quick: shorter timed samples than advise's MIN_SAMPLE_S (a smoke run, not a check)
+QUICK_MIN_SAMPLE_S = 0.01
+
+
+def check_scene(scene, kind: str, cal, n_rays: int, repeats: int, seed: int,
+                min_sample: float = advise.MIN_SAMPLE_S) -> tuple[list[dict], list[dict]]:
     """(rows per budget R, rows per candidate) of one scene and ray kind."""
-    cands = advise.predict(scene, kind, cal, seed)
-    truth = advise.measure(scene, kind, [(c["structure"], c["params"]) for c in cands], n_rays, repeats, seed)
+    cands = advise.predict(scene, kind, cal, seed, min_sample=min_sample)
+    truth = advise.measure(scene, kind, [(c["structure"], c["params"]) for c in cands], n_rays, repeats, seed,
+                           min_sample)
     per_cand = [{"scene": scene.name, "N": scene.n, "ray_kind": kind, "structure": c["structure"], "how": c["how"],
                  "pred_build_ms": 1e3 * c["build_s"], "meas_build_ms": 1e3 * truth[c["structure"]]["build_s"],
                  "pred_ray_ns": 1e9 * c["ray_s"], "meas_ray_ns": 1e9 * truth[c["structure"]]["ray_s"],
@@ -121,7 +127,8 @@ def main(ctx, args) -> int:
         scene = load_scene(name)
         for kind in KINDS:
             t0 = time.time()
-            r, c = check_scene(scene, kind, cal, n_rays, repeats, args.seed)
+            r, c = check_scene(scene, kind, cal, n_rays, repeats, args.seed,
+                               QUICK_MIN_SAMPLE_S if args.quick else advise.MIN_SAMPLE_S)
             rows += [dict(x, seconds=time.time() - t0) for x in r]
             cands += c
     df, cdf = pd.DataFrame(rows), pd.DataFrame(cands)
