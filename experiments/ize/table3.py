@@ -10,7 +10,7 @@ import pandas as pd
 from costmodel.fit import GridCostFit, refine_minimum
 from experiments.ize import memmodel, memprobe
 from experiments.ize.table2 import counter_fits
-from experiments.core.common import add_ray_args, dash_int
+from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
@@ -134,11 +134,11 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for _, r in tab.iterrows():
         lines.append(f"| {r.N:,} | {f(r.empirical_M)} ({f(r.paper_empirical_M)}) | {f(r.theory_M)}, {r.penalty_pct:.1f}% "
-                     f"({r.paper_penalty_pct}%) | {f(r.fitted_M)}, {r.penalty_fitted_pct:.1f}% | "
+                     f"({dash(r.paper_penalty_pct, '{}%')}) | {f(r.fitted_M)}, {r.penalty_fitted_pct:.1f}% | "
                      f"{r.scene_ti_over_ts:.2f}, {f(r.scene_fit_M)}, {r.penalty_scene_pct:.1f}% | "
                      f"{f(r.memory_M)}, {r.penalty_memory_pct:.1f}% [{r.penalty_memory_range}] / {f(r.memory_M_camera)}, "
                      f"{r.penalty_memory_pct_camera:.1f}% | {r.speedup_vs_8N:.2f}x "
-                     f"({r.paper_speedup}x) | {r.size_vs_8N:.1f}x ({r.paper_size}x) | {r.memory_vs_8N:.1f}x | {r.memory_MiB:.1f} MiB | "
+                     f"({dash(r.paper_speedup, '{}x')}) | {r.size_vs_8N:.1f}x ({dash(r.paper_size, '{}x')}) | {r.memory_vs_8N:.1f}x | {r.memory_MiB:.1f} MiB | "
                      f"{f(r.empirical_M_camera)}, {r.penalty_pct_camera:.1f}% |")
     lines += ["", "Eq 5 (long-skinny) vs Eq 1 (compact) fit of the same sweeps — the skinny model should fit better:", "",
               "| scene | rays | Eq 5 MAPE | Eq 1 MAPE | Eq 5 R² | Eq 1 R² |", "|---|---|---|---|---|---|"]
