@@ -5,7 +5,6 @@ times beside counts."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 #: the paper on Around Again: grid tests / minimum, list tests / minimum, list time / grid time
 PAPER_AROUND = {"grid_over_min": 618.0, "lists_over_min": 4.5, "list_over_grid_time": 0.35,
@@ -204,7 +203,7 @@ def time_figure(ctx, df, around, paper_table1, target) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    from experiments.core.figures import log_scale
+    from experiments.core.figures import log_scale, row_legend
     paper = {p[0]: p for p in paper_table1}
     fams = list(dict.fromkeys(df.family))
     ncol = len(fams) + (1 if around is not None and len(around) else 0)
@@ -249,13 +248,7 @@ def time_figure(ctx, df, around, paper_table1, target) -> None:
     if ncol > len(fams):
         _around_panels([axes[i][-1] for i in range(3)], around)
     for i in range(3):
-        h, lab = [], []
-        for ax in axes[i]:
-            for hh, ll in zip(*ax.get_legend_handles_labels()):
-                if ll not in lab:
-                    h.append(hh)
-                    lab.append(ll)
-        axes[i][-1].legend(h, lab, fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        row_legend(axes[i])
     fig.suptitle("Fournier & Poulin 1993: times beside counts, sorted lists vs a 30³ grid (SPD and teapot: eye rays; "
                  "Around Again: primary + shadow + reflection rays)", fontsize=8)
     ctx.finish_figure(fig, f"{target}-times")
