@@ -13,6 +13,8 @@ AROUND_STRUCTS = ("grid30", "grid30mb", "sl-hier")
 RAY_KINDS = ("primary", "shadow", "reflection")
 #: at most this many rays of each kind are checked against the float64 oracle
 ORACLE_RAYS = 4096
+#: rays x objects elements per chunk of :func:`flat_object_counts` (a few arrays of this many float64)
+FLAT_CHUNK_ELEMENTS = 4_000_000
 
 
 # ---------------------------------------------------------------- flat lists counted per object
@@ -26,8 +28,16 @@ def flat_object_counts(boxes, o, d, f) -> dict:
     after the opening and before the walk stops. Returns arrays ``tests``, ``events`` (from −∞, as
     our lists count) and ``events_ahead`` (0 ≤ Δt: the paper's, whose camera initialisation treats
     the events behind the eye once per image)."""
-    boxes = np.asarray(boxes, np.float64)
     o, d, f = (np.asarray(a, np.float64) for a in (o, d, f))
+    # rays in chunks: the arrays below are (rays, objects), 16,384 x 16,384 for tetra-7 at 128²
+    step = max(1, FLAT_CHUNK_ELEMENTS // max(1, len(boxes)))
+    parts = [_flat_counts_chunk(np.asarray(boxes, np.float64), o[i:i + step], d[i:i + step], f[i:i + step])
+             for i in range(0, len(o), step)]
+    return {k: np.concatenate([p[k] for p in parts]) for k in ("tests", "events", "events_ahead")}
+
+
+def _flat_counts_chunk(boxes, o, d, f) -> dict:
+    """:func:`flat_object_counts` of one chunk of rays."""
     m = len(o)
     lo, hi = boxes[:, :3], boxes[:, 3:]
     a = np.full((m, len(boxes)), -np.inf)
