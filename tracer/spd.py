@@ -346,13 +346,13 @@ def spd_view(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     return np.array(e, float), np.array(a, float), np.array(u, float), float(fov)
 
 
-def spd_camera_rays(name: str, width: int, height: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Pinhole primary rays through pixel centres from the SPD viewpoint (row-major), as float32
-    (m, 3) origins and unit directions."""
+def pinhole_rays(eye, at, up, fov: float, width: int, height: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole rays through pixel centres (row-major) from ``eye`` toward ``at`` with ``up`` and a
+    vertical field of view ``fov`` (degrees), as float32 (m, 3) origins and unit directions."""
     height = height or width
-    eye, at, up, fov = spd_view(name)
+    eye, at = np.asarray(eye, float), np.asarray(at, float)
     fwd = (at - eye) / np.linalg.norm(at - eye)
-    right = np.cross(fwd, up)
+    right = np.cross(fwd, np.asarray(up, float))
     right /= np.linalg.norm(right)
     upv = np.cross(right, fwd)
     tanh = np.tan(np.radians(fov) / 2)
@@ -363,3 +363,10 @@ def spd_camera_rays(name: str, width: int, height: int | None = None) -> tuple[n
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     o = np.broadcast_to(eye, d.shape)
     return np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
+
+
+def spd_camera_rays(name: str, width: int, height: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pinhole primary rays through pixel centres from the SPD viewpoint (row-major), as float32
+    (m, 3) origins and unit directions."""
+    eye, at, up, fov = spd_view(name)
+    return pinhole_rays(eye, at, up, fov, width, height)

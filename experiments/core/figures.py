@@ -73,3 +73,15 @@ def finish_log_panels(ctx, fig, axes, titles, xlabel: str, ylabel: str, name: st
     axes[0][0].set_ylabel(ylabel, **kw)
     axes[0][-1].legend(fontsize=6)
     return ctx.finish_figure(fig, name)
+
+
+def row_legend(axes, **kw) -> None:
+    """One legend for a row of panels: every distinct label of ``axes`` once, on the last panel,
+    outside its right edge (``kw`` overrides the placement)."""
+    handles, labels = [], []
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    axes[-1].legend(handles, labels, **{"fontsize": 6, "loc": "upper left", "bbox_to_anchor": (1.02, 1.0), **kw})

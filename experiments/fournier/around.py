@@ -5,7 +5,6 @@ times beside counts."""
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 #: the paper on Around Again: grid tests / minimum, list tests / minimum, list time / grid time
 PAPER_AROUND = {"grid_over_min": 618.0, "lists_over_min": 4.5, "list_over_grid_time": 0.35,
@@ -14,6 +13,8 @@ AROUND_STRUCTS = ("grid30", "grid30mb", "sl-hier")
 RAY_KINDS = ("primary", "shadow", "reflection")
 #: at most this many rays of each kind are checked against the float64 oracle
 ORACLE_RAYS = 4096
+#: rays x objects elements per chunk of :func:`flat_object_counts` (a few arrays of this many float64)
+FLAT_CHUNK_ELEMENTS = 4_000_000
 
 
 # ---------------------------------------------------------------- flat lists counted per object
@@ -27,8 +28,16 @@ def flat_object_counts(boxes, o, d, f) -> dict:
     after the opening and before the walk stops. Returns arrays ``tests``, ``events`` (from −∞, as
     our lists count) and ``events_ahead`` (0 ≤ Δt: the paper's, whose camera initialisation treats
     the events behind the eye once per image)."""
-    boxes = np.asarray(boxes, np.float64)
     o, d, f = (np.asarray(a, np.float64) for a in (o, d, f))
+    # rays in chunks: the arrays below are (rays, objects), 16,384 x 16,384 for tetra-7 at 128²
+    step = max(1, FLAT_CHUNK_ELEMENTS // max(1, len(boxes)))
+    parts = [_flat_counts_chunk(np.asarray(boxes, np.float64), o[i:i + step], d[i:i + step], f[i:i + step])
+             for i in range(0, len(o), step)]
+    return {k: np.concatenate([p[k] for p in parts]) for k in ("tests", "events", "events_ahead")}
+
+
+def _flat_counts_chunk(boxes, o, d, f) -> dict:
+    """:func:`flat_object_counts` of one chunk of rays."""
     m = len(o)
     lo, hi = boxes[:, :3], boxes[:, 3:]
     a = np.full((m, len(boxes)), -np.inf)
@@ -204,7 +213,7 @@ def time_figure(ctx, df, around, paper_table1, target) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    from experiments.core.figures import log_scale
+    from experiments.core.figures import log_scale, row_legend
     paper = {p[0]: p for p in paper_table1}
     fams = list(dict.fromkeys(df.family))
     ncol = len(fams) + (1 if around is not None and len(around) else 0)
@@ -249,13 +258,7 @@ def time_figure(ctx, df, around, paper_table1, target) -> None:
     if ncol > len(fams):
         _around_panels([axes[i][-1] for i in range(3)], around)
     for i in range(3):
-        h, lab = [], []
-        for ax in axes[i]:
-            for hh, ll in zip(*ax.get_legend_handles_labels()):
-                if ll not in lab:
-                    h.append(hh)
-                    lab.append(ll)
-        axes[i][-1].legend(h, lab, fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        row_legend(axes[i])
     fig.suptitle("Fournier & Poulin 1993: times beside counts, sorted lists vs a 30³ grid (SPD and teapot: eye rays; "
                  "Around Again: primary + shadow + reflection rays)", fontsize=8)
     ctx.finish_figure(fig, f"{target}-times")

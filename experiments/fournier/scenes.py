@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracer.scenetype import Scene
+from tracer.spd import pinhole_rays as spd_pinhole_rays
 
 #: triangles per patch of the Utah teapot mesh, in its stored order: rim 4, body 8, handle 4,
 #: spout 4, lid 8 (the 4 knob patches lose their 10 degenerate pole triangles), bottom 4 (likewise)
@@ -33,20 +34,8 @@ CAN = {"radius": 0.33, "height": 1.22, "sides": 48, "rings": 10}
 
 
 def pinhole_rays(eye, at, fov, width, height=None, up=(0.0, 0.0, 1.0)):
-    """Row-major pinhole rays through pixel centres (float32 origins, unit directions)."""
-    height = height or width
-    eye, at = np.asarray(eye, float), np.asarray(at, float)
-    fwd = (at - eye) / np.linalg.norm(at - eye)
-    right = np.cross(fwd, up)
-    right /= np.linalg.norm(right)
-    upv = np.cross(right, fwd)
-    tanh = np.tan(np.radians(fov) / 2)
-    jy, jx = np.mgrid[0:height, 0:width].astype(np.float64)
-    sx = (2 * (jx + 0.5) / width - 1) * tanh * width / height
-    sy = (1 - 2 * (jy + 0.5) / height) * tanh
-    d = (fwd + sx[..., None] * right + sy[..., None] * upv).reshape(-1, 3)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return np.ascontiguousarray(np.broadcast_to(eye, d.shape), np.float32), np.ascontiguousarray(d, np.float32)
+    """Row-major pinhole rays through pixel centres (float32 origins, unit directions), z up."""
+    return spd_pinhole_rays(eye, at, up, fov, width, height)
 
 
 def _quad(p0, p1, p2, p3) -> np.ndarray:

@@ -17,7 +17,7 @@ import pandas as pd
 
 from experiments.core.store import atomic_write
 
-from experiments.core.figures import log_scale
+from experiments.core.figures import log_scale, row_legend
 
 from experiments.core.common import progress
 
@@ -490,13 +490,7 @@ def _figure(ctx, df):
     axes[0][0].set_ylabel("intersection tests per ray", fontsize=8)
     axes[1][0].set_ylabel("events (grid: cells) per ray", fontsize=8)
     for i in range(2):
-        h, lab = [], []
-        for ax in axes[i]:
-            for hh, ll in zip(*ax.get_legend_handles_labels()):
-                if ll not in lab:
-                    h.append(hh)
-                    lab.append(ll)
-        axes[i][-1].legend(h, lab, fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+        row_legend(axes[i])
     fig.suptitle("Fournier & Poulin 1993: sorted event lists vs a 30³ grid, SPD scenes (eye rays)", fontsize=9)
     ctx.finish_figure(fig, TARGET)
 

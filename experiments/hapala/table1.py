@@ -432,7 +432,7 @@ def run(ctx, args, log=print) -> dict:
     md += cmp_md
     cl = claims(tab, PAPER, KINDS)
     ctx.write_csv(out_dir / "claims.csv", cl)
-    md += claims_markdown(cl)
+    md += claims_markdown(cl, tab)
     if getattr(args, "retest", False):
         raw2 = measure_all(ctx, names, cfg, log=log, repeat_pass=2)
         write_json(out_dir / "raw_retest.json", raw2)
