@@ -216,7 +216,8 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     scene = load_scene("bunny-948")
     rays = {"random": make_rays(scene, "random", 3000, seed=0)}
     store = RunContext(out=tmp_path).store()
-    rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 3)
+    # 7 interleaved rounds: with 3, a burst of load on a shared machine once moved the median ratio to 0.43
+    rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
     ref, one = rows
     assert 0.8 < ref["ratio_to_ref"] < 1.25
     assert one["ratio_to_ref"] > 3  # one cell: every ray tests every triangle
