@@ -149,13 +149,13 @@ def test_all_quick_into_a_fresh_folder(tmp_path):
 
 
 def test_fit_quick_json(tmp_path):
-    # 10,000 rays and 5 rounds: the quick run's 2 ms samples of 2,000 rays left Tsetup at nnls's bound 0
-    # when the machine was loaded
-    p = run_cli("fit", "--quick", "--scene", "bunny-948", "--rays", "10000", "--repeats", "5", "--json", out=tmp_path)
+    p = run_cli("fit", "--quick", "--scene", "bunny-948", "--rays", "2000", "--json", out=tmp_path)
     out = json.loads(p.stdout.strip().splitlines()[-1])
     for k in ("ts", "ti", "tsetup", "ti_over_ts", "mape", "m_pred", "m_best", "penalty", "model"):
         assert k in out
-    assert out["ti"] > 0 and out["tsetup"] > 0 and out["ts"] >= 0 and 0 < out["r2"] <= 1
+    assert out["ti"] > 0 and out["ts"] >= 0 and 0 < out["r2"] <= 1
+    # the model selection may drop Tsetup ("...-no-setup", fewer constants within tolerance): then it is 0
+    assert out["tsetup"] == 0 if out["model"].endswith("no-setup") else out["tsetup"] > 0
 
 
 def test_bad_input_exit_code(tmp_path):
