@@ -130,22 +130,28 @@ class MemoryCostFit:
     """T_ray = Tsetup[scene] + Ts0 steps + Ti tests + kappa * memory_feature, pooled over scenes
     (nnls on relative residuals). ``memory=False`` drops the kappa term (the counter model).
 
-    Fitted: ``tsetup_`` (per scene), ``ts0_``, ``ti_``, ``kappa_``, ``metrics_``, ``n_constants_``."""
+    Fitted: ``tsetup_`` (per scene), ``ts0_``, ``ti_``, ``kappa_``, ``coef_`` (the work terms'
+    constants, in :meth:`_work_columns` order), ``metrics_``, ``n_constants_``."""
 
     def __init__(self, machine=None, memory: bool = True):
         self.machine, self.memory = machine, memory
 
+    def _work_columns(self, frame) -> list:
+        """The per-ray work terms (one column each; each gets one pooled non-negative constant)."""
+        cols = [np.asarray(frame["steps"], float), np.asarray(frame["tests"], float)]
+        cols.append(memory_feature(self.machine, frame["steps"], frame["occupied"], frame["cells"],
+                                   frame["memory_bytes"]) if self.memory else np.zeros(len(cols[0])))
+        return cols
+
     def _design(self, frame):
         cats = list(dict.fromkeys(frame["scene"]))
-        X = np.zeros((len(np.asarray(frame["steps"])), len(cats) + 3))
+        work = self._work_columns(frame)
+        X = np.zeros((len(work[0]), len(cats) + len(work)))
         sc = np.asarray(frame["scene"])
         for j, c in enumerate(cats):
             X[sc == c, j] = 1.0
-        X[:, -3] = frame["steps"]
-        X[:, -2] = frame["tests"]
-        if self.memory:
-            X[:, -1] = memory_feature(self.machine, frame["steps"], frame["occupied"], frame["cells"],
-                                      frame["memory_bytes"])
+        for j, col in enumerate(work):
+            X[:, len(cats) + j] = col
         return X, cats
 
     def fit(self, frame, T):
@@ -154,21 +160,60 @@ class MemoryCostFit:
         w = 1.0 / T
         coef, _ = nnls(X * w[:, None], T * w)
         self.scenes_ = cats
-        self.tsetup_ = dict(zip(cats, (float(c) for c in coef[:-3])))
-        self.ts0_, self.ti_, self.kappa_ = (float(v) for v in coef[-3:])
+        self.tsetup_ = dict(zip(cats, (float(c) for c in coef[:len(cats)])))
+        self.coef_ = coef[len(cats):].copy()
+        self.ts0_, self.ti_, self.kappa_ = (float(v) for v in self.coef_[:3])
         self.n_constants_ = len(cats) + (3 if self.memory else 2)
         self.metrics_ = _metrics(T, X @ coef)
         return self
 
     def work(self, frame) -> np.ndarray:
         """Predicted time without Tsetup (ns per ray)."""
-        X, _ = self._design(frame)
-        return X[:, -3:] @ np.array([self.ts0_, self.ti_, self.kappa_])
+        return np.column_stack(self._work_columns(frame)) @ self.coef_
 
     def predict(self, frame, setup: float | None = None) -> np.ndarray:
         """Time per ray; ``setup`` defaults to the mean Tsetup of the training scenes."""
         s = float(np.mean(list(self.tsetup_.values()))) if setup is None else setup
         return s + self.work(frame)
+
+
+def entry_feature(machine, setups, cells, memory_bytes) -> np.ndarray:
+    """setups * x(B_cells) (ns): the load of the cell a ray enters the grid by, at a random place in
+    the cell array, priced at the latency of the array's working set over an L1 hit. A ray's later
+    steps go to neighbouring cells and their loads overlap (the DDA does not wait for them), the
+    first one is exposed; it is what makes the short walks of ``room`` or ``teapot-in-stadium``
+    slow down as their grid grows while their step and test counts stay put."""
+    return np.asarray(setups, float) * machine.extra_ns(working_sets(cells, memory_bytes)[0])
+
+
+def refs_step_feature(steps, refs, n) -> np.ndarray:
+    """steps * ln(refs / N): the step cost growing with the mean number of cells a triangle
+    overlaps (the cells' size against the triangles'), found by cross-validation over the sweeps
+    of ``predict`` (long skinny cylinders: Ts 8-15 ns; compact scans at the same M: 4-6 ns)."""
+    return np.asarray(steps, float) * np.log(np.maximum(np.asarray(refs, float) / np.maximum(np.asarray(n, float), 1.0), 1.0))
+
+
+class EntryRefsCostFit(MemoryCostFit):
+    """The counter model with the entry-cell load and the refs-per-triangle step term:
+
+        T_ray = Tsetup + Ts0 steps + Ti tests + kappa_e setups x(B_cells) + Ts_r steps ln(refs / N)
+
+    (:func:`entry_feature`, :func:`refs_step_feature`). Fitted as :class:`MemoryCostFit`;
+    ``kappa_`` is kappa_e and ``ts_refs_`` is Ts_r."""
+
+    def __init__(self, machine=None):
+        super().__init__(machine, memory=True)
+
+    def _work_columns(self, frame) -> list:
+        return [np.asarray(frame["steps"], float), np.asarray(frame["tests"], float),
+                entry_feature(self.machine, frame["setups"], frame["cells"], frame["memory_bytes"]),
+                refs_step_feature(frame["steps"], frame["refs"], frame["N"])]
+
+    def fit(self, frame, T):
+        super().fit(frame, T)
+        self.ts_refs_ = float(self.coef_[3])
+        self.n_constants_ = len(self.scenes_) + 4
+        return self
 
 
 def aic(T, pred, k: int) -> float:
@@ -185,11 +230,13 @@ def interpolate_counters(frame, x_new, x: str = "cells") -> dict:
     g = frame.sort_values(x).drop_duplicates(x)
     lx = np.log(g[x].to_numpy(float))
     out = {x: np.asarray(x_new, float)}
-    for col in ("steps", "tests", "occupied", "memory_bytes", "cells"):
-        if col != x:
+    for col in ("steps", "tests", "occupied", "memory_bytes", "cells", "refs", "setups"):
+        if col != x and col in g:
             v = np.maximum(g[col].to_numpy(float), 1e-9)
             out[col] = np.exp(np.interp(np.log(out[x]), lx, np.log(v)))
     out["scene"] = np.full(len(out[x]), str(g["scene"].iloc[0]))
+    if "N" in g:
+        out["N"] = np.full(len(out[x]), float(g["N"].iloc[0]))
     return out
 
 
@@ -209,11 +256,9 @@ class PaperCountFit(MemoryCostFit):
         super().__init__(None, memory=False)
         self.ti_over_ts = ti_over_ts
 
-    def _design(self, frame):
-        X, cats = super()._design(frame)
-        X[:, -3] = X[:, -3] + self.ti_over_ts * X[:, -2]
-        X[:, -2] = 0.0
-        return X, cats
+    def _work_columns(self, frame) -> list:
+        steps, tests, zero = super()._work_columns(frame)
+        return [steps + self.ti_over_ts * tests, np.zeros_like(zero), zero]
 
     def fit(self, frame, T):
         super().fit(frame, T)

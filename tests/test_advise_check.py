@@ -37,6 +37,11 @@ def test_camera_probe_rays_are_whole_packets_of_the_full_frame(load):
     for w, b in zip(where, blocks[[0, len(blocks) // 2, -1]]):
         np.testing.assert_array_equal(fb[w], b)
     assert where[0] == 0 and where[-1] == len(fb) - 1 and 0 < where[1] < where[-1]
+    # in PROBE_RUNS runs of consecutive packets of the frame, in the frame's order
+    per = len(blocks) // advise.PROBE_RUNS
+    np.testing.assert_array_equal(blocks[1:per], fb[1:per])
+    assert not np.array_equal(blocks[per], fb[per])
+    np.testing.assert_array_equal(blocks[-per:], fb[-per:])
     assert advise.probe_rays(scene, "random", 0).n == advise.PROBE_RAYS
 
 

@@ -63,6 +63,31 @@ def test_memory_fit_recovers_constants():
     assert f[f.scene == "c"].cells.min() <= m_opt <= f[f.scene == "c"].cells.max()
 
 
+def test_entry_refs_fit_recovers_constants_and_paper_fit_keeps_its_ratio():
+    rng = np.random.default_rng(1)
+    mach = _fake_machine()
+    rows = []
+    for s, n, stretch in (("a", 1000, 1.0), ("b", 5000, 3.0), ("c", 20000, 1.5), ("d", 2000, 8.0)):
+        for cells in np.geomspace(n / 8, 64 * n, 9):
+            steps, tests = 2 * cells ** (1 / 3), 4 * n / cells ** (2 / 3) + 1
+            rows.append({"scene": s, "N": n, "cells": cells, "steps": steps, "tests": tests, "occupied": 0.3 * steps,
+                         "setups": 0.6, "refs": n * stretch * (1 + cells / n) ** (1 / 3),
+                         "memory_bytes": 4 * cells + 60 * n})
+    f = pd.DataFrame(rows)
+    true = (50 + 3.0 * f.steps + 12.0 * f.tests + 0.8 * mm.entry_feature(mach, f.setups, f.cells, f.memory_bytes)
+            + 2.0 * mm.refs_step_feature(f.steps, f.refs, f.N))
+    T = true * (1 + 0.002 * rng.standard_normal(len(f)))
+    fit = mm.EntryRefsCostFit(mach).fit(f, T)
+    assert fit.ts0_ == pytest.approx(3.0, rel=0.15) and fit.ti_ == pytest.approx(12.0, rel=0.1)
+    assert fit.kappa_ == pytest.approx(0.8, rel=0.15) and fit.ts_refs_ == pytest.approx(2.0, rel=0.15)
+    assert fit.n_constants_ == 4 + 4
+    assert mm.MemoryCostFit(mach, memory=False).fit(f, T).metrics_["mape"] > 3 * fit.metrics_["mape"]
+    # the paper's model: one constant b for steps + 4 tests
+    paper = mm.PaperCountFit().fit(f, 50 + 2.0 * (f.steps + 4 * f.tests))
+    assert paper.ts0_ == pytest.approx(2.0, rel=1e-6) and paper.ti_ == 0.0 and paper.n_constants_ == 4 + 1
+    np.testing.assert_allclose(paper.work(f), 2.0 * (f.steps + 4 * f.tests), rtol=1e-6)
+
+
 def test_chase_probe_runs_and_is_positive():
     assert chase_ns(8192, accesses=20_000, repeats=1) > 0
 
