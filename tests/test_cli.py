@@ -46,7 +46,7 @@ def test_verify_text_output(run_cli):
 def test_bench_json(run_cli, tmp_path):
     out_dir = tmp_path / "results"
     out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",
-                        "--structures", "grid,embree", "--json", "--out", str(out_dir)))
+                        "--structures", "grid,bvh4,embree", "--threads", "1", "--json", "--out", str(out_dir)))
     assert out["scene"] == "bunny-948" and out["faces"] == 948 and out["rays"] == 5000
     grid = out["structures"]["grid"]
     for key in ("build_s", "random_mrays", "camera_mrays"):
@@ -68,6 +68,11 @@ def test_bench_json(run_cli, tmp_path):
     assert set(out["ratios"][key]) >= {"random", "camera", "build"}
     # Embree traces on one thread: more of ours are compared per thread, and the name says so
     assert ("per thread" in key) == (out["threads"] > 1)
+    # the headline structures that ran are paired with Embree in the same rounds
+    assert set(out["paired"]) == {"grid/embree", "bvh4/embree"}
+    for v in out["paired"].values():
+        assert set(v) == {"random", "camera"} and all(0 < k["min"] <= k["ratio"] <= k["max"] for k in v.values())
+    assert "| bvh4/embree | " in summary
 
 
 # ---------------------------------------------------------------- bad input: exit 2, one line

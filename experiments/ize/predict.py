@@ -12,7 +12,10 @@ Models (:mod:`costmodel.memory`), simplest first:
 2. **counter** — T = Tsetup + Ts steps + Ti tests, Ts and Ti pooled (:class:`MemoryCostFit`, no memory term);
 3. **memory-aware** — the counter model plus kappa (steps x(B_cells) + occupied x(B_data)), x(B)
    the host's load latency at working set B over an L1 hit (:class:`tracer.machine.MachineModel`);
-4. **per-scene** — the counter model fitted on the scene's own sweep (needs the sweep itself).
+4. **entry-refs** — the counter model plus kappa_e setups x(B_cells) (the load of the cell a ray
+   enters the grid by, at the cell array's latency) and Ts_r steps ln(refs/N) (a step cost growing
+   with the cells a triangle overlaps) (:class:`costmodel.memory.EntryRefsCostFit`);
+5. **per-scene** — the counter model fitted on the scene's own sweep (needs the sweep itself).
 
 Held-out error: leave one scene out; the pooled constants are fitted on the other scenes, the
 held-out scene's Tsetup on one measured point (its median-M point: "one calibration point"), and
@@ -25,7 +28,8 @@ points a model is fitted on — per point its build plus 12 traces (warm-up and 
 beside the reference grid) — plus, for the memory-aware model, the host probe's seconds.
 
 Model choice per scene: the simplest model whose held-out MAPE is within ``TOLERANCE_PP``
-percentage points of the scene's best; over all scenes, AIC of the in-sample fits.
+percentage points of the scene's best; over all scenes, AIC of the in-sample fits. The choice is
+also held out (:func:`nested_selection`): a model picked on the other scenes only, scored on this one.
 """
 from __future__ import annotations
 

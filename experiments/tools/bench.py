@@ -128,10 +128,14 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     return out
 
 
+#: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
+PAIRED = ("grid", "kdtree-fast", "bvh4", "cgt")
+
+
 def _paired(scene, rays, s, threads, log, rounds: int = 7) -> dict:
-    """The headline ratios measured in interleaved rounds (:func:`tracer.timing.time_paired`): grid
-    against Embree (both one thread), and the grid's scaling from 1 to ``threads`` threads (wall
-    time for both). Median, min and max of the per-round ratios."""
+    """The headline ratios measured in interleaved rounds (:func:`tracer.timing.time_paired`): each of
+    :data:`PAIRED` that ran against Embree (all one thread, in the same rounds), and the grid's scaling
+    from 1 to ``threads`` threads (wall time for both). Median, min and max of the per-round ratios."""
     import numba
 
     from tracer.reference import EmbreeAccel
@@ -139,17 +143,18 @@ def _paired(scene, rays, s, threads, log, rounds: int = 7) -> dict:
     out = {}
     if "grid" not in s:
         return out
-    struct, params = VARIANTS["grid"]
-    grid = build(scene, struct, **params)
+    accels = {name: build(scene, *VARIANTS[name][:1], **VARIANTS[name][1]) for name in PAIRED if name in s}
+    grid = accels["grid"]
     if "embree" in s and threads == 1:
         emb = EmbreeAccel().build(scene)
-        out["grid/embree"] = {}
         for kind, r in rays.items():
-            tp = time_paired({"grid": lambda: grid.intersect(r.origins, r.directions, counters=False),
-                              "embree": lambda: emb.intersect(r.origins, r.directions, counters=False)}, rounds)
-            med, lo, hi = paired_ratio(tp, "embree", "grid")  # throughput ratio = time ratio inverted
-            out["grid/embree"][kind] = {"ratio": med, "min": lo, "max": hi, "rounds": rounds}
-            log(f"  paired grid/embree {kind:7s} {med:6.3f}x  (rounds {lo:.3f}-{hi:.3f})")
+            fns = {name: (lambda a=a: a.intersect(r.origins, r.directions, counters=False)) for name, a in accels.items()}
+            fns["embree"] = lambda: emb.intersect(r.origins, r.directions, counters=False)
+            tp = time_paired(fns, rounds)
+            for name in accels:
+                med, lo, hi = paired_ratio(tp, "embree", name)  # throughput ratio = time ratio inverted
+                out.setdefault(f"{name}/embree", {})[kind] = {"ratio": med, "min": lo, "max": hi, "rounds": rounds}
+                log(f"  paired {name}/embree {kind:7s} {med:6.3f}x  (rounds {lo:.3f}-{hi:.3f})")
     if threads > 1:
         out["grid_scaling"] = {}
         def on(n, r):
@@ -214,9 +219,16 @@ def _summary(out: dict) -> str:
         for k, v in out["ratios"].items():
             lines.append(f"| {k} | {v.get('random', float('nan')):.3f} | {v.get('camera', float('nan')):.3f} | "
                          f"{v.get('build', float('nan')):.3f} |")
-    for k, v in (out.get("paired") or {}).get("grid/embree", {}).items():
-        lines.append(f"\nPaired (interleaved rounds, one thread each) grid/Embree {k}: {v['ratio']:.3f}x "
-                     f"(rounds {v['min']:.3f} – {v['max']:.3f})")
+    paired = {k: v for k, v in (out.get("paired") or {}).items() if k.endswith("/embree")}
+    if paired:
+        n_rounds = next(iter(next(iter(paired.values())).values()))["rounds"]
+        lines += ["", f"Paired with Embree (interleaved rounds, one thread each, {n_rounds} rounds; median "
+                      "[min – max] of the per-round throughput ratios):", "",
+                  "| ratio | random | camera |", "|---|---|---|"]
+        for k, v in paired.items():
+            lines.append(f"| {k} | " + " | ".join(
+                f"{v[kind]['ratio']:.3f} [{v[kind]['min']:.3f} – {v[kind]['max']:.3f}]" if kind in v else "–"
+                for kind in ("random", "camera")) + " |")
     for k, v in out["unavailable"].items():
         lines.append(f"\nUnavailable: {k}: {v}")
     return "\n".join(lines) + "\n"
