@@ -93,7 +93,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
     from experiments.core.store import git_commit
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
-           "git_commit": git_commit(), "host": host_info(), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+           "git_commit": git_commit(), "host": host_info(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
            "structures": {}, "unavailable": {}}
     for name in progress(names, f"bench {scene.name}", quiet=log is not print, unit="structure"):
         t0 = time.perf_counter()
@@ -143,6 +143,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
     out["paired"] = _paired(scene, rays, s, threads, log)
+    out["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     return out
 
 
@@ -217,7 +218,9 @@ def _summary_all(folder) -> str:
         sec = _summary(out).replace("# bench:", "## bench:", 1).split("\n")
         host = out.get("host") or {}
         sec.insert(1, f"\nMeasured by commit {out.get('git_commit', 'unknown (before bench recorded it)')} on "
-                      f"{host.get('host', '?')} ({host.get('cpu', '?')}), finished {out.get('finished', '?')}.")
+                      f"{host.get('host', '?')} ({host.get('cpu', '?')}), "
+                      + (f"{out['started']} – {out['finished']}." if "started" in out
+                         else f"started {out.get('finished', '?')} (files before the fix record the start as 'finished')."))
         parts += [""] + sec
     return "\n".join(parts).rstrip("\n") + "\n"
 
