@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from experiments.tools import advise, advise_check
+from tracer.errors import GridcostError
 
 
 class _FixedEstimator:
@@ -24,25 +26,47 @@ def _cal(T):
     return {k: {h: (_FixedEstimator(T, 1e-7), rel) for h in ("kdtree", "bvh")} for k in ("random", "path")}
 
 
-def test_camera_probe_rays_are_whole_packets_of_the_full_frame(load):
+def test_probe_pool_sets_are_disjoint_whole_packets_of_the_full_frame(load):
     from tracer.rays import make_rays
     scene = load("bunny-948")
     full = make_rays(scene, "camera", advise.CHECK_RAYS, seed=0)
-    r = advise.probe_rays(scene, "camera", 0)
-    assert r.n == advise.PROBE_RAYS // advise.PACKET * advise.PACKET and r.kind == "camera"
-    blocks = r.directions.reshape(-1, advise.PACKET, 3)
+    pool = advise.probe_pool(scene, "camera", 0)
+    per, runs = advise.PACKETS_PER_RUN, advise.PROBE_RUNS
+    assert len(pool) == advise.PROBE_SETS and all(r.n == runs * per * advise.PACKET and r.kind == "camera" for r in pool)
     fb = full.directions[: full.n // advise.PACKET * advise.PACKET].reshape(-1, advise.PACKET, 3)
-    # each probe packet is one packet of the full frame, packets spread from the first to the last
-    where = [int(np.flatnonzero((fb[:, 0] == b[0]).all(axis=1))[0]) for b in blocks[[0, len(blocks) // 2, -1]]]
-    for w, b in zip(where, blocks[[0, len(blocks) // 2, -1]]):
-        np.testing.assert_array_equal(fb[w], b)
-    assert where[0] == 0 and where[-1] == len(fb) - 1 and 0 < where[1] < where[-1]
-    # in PROBE_RUNS runs of consecutive packets of the frame, in the frame's order
-    per = len(blocks) // advise.PROBE_RUNS
-    np.testing.assert_array_equal(blocks[1:per], fb[1:per])
-    assert not np.array_equal(blocks[per], fb[per])
-    np.testing.assert_array_equal(blocks[-per:], fb[-per:])
-    assert advise.probe_rays(scene, "random", 0).n == advise.PROBE_RAYS
+    key = {fb[i].tobytes(): i for i in range(len(fb))}
+    where = [np.array([key[b.tobytes()] for b in r.directions.reshape(-1, advise.PACKET, 3)]) for r in pool]
+    for k, w in enumerate(where):
+        # PROBE_RUNS runs of consecutive packets of the frame, in the frame's order, spread over it
+        runs_of = w.reshape(runs, per)
+        assert (np.diff(runs_of, axis=1) == 1).all() and (np.diff(runs_of[:, 0]) > per).all()
+        assert runs_of[0, 0] == k * per and runs_of[-1, 0] > 0.9 * len(fb)
+    # the sets are disjoint and together cover the frame
+    every = np.concatenate(where)
+    assert len(np.unique(every)) == len(every) and len(every) > 0.99 * len(fb)
+    rnd = advise.probe_pool(scene, "random", 0)
+    assert len(rnd) == advise.PROBE_SETS and all(r.n == advise.PROBE_RAYS for r in rnd)
+    assert not np.array_equal(rnd[0].directions, rnd[1].directions)
+
+
+def test_time_structures_traces_the_next_set_at_each_call(load, monkeypatch):
+    """A probe never traces one ray set twice in a row: each call takes the next set of the pool."""
+    scene = load("bunny-948")
+    pool = advise.probe_pool(scene, "random", 0)[:3]
+    seen = []
+    from tracer.grid import UniformGrid
+    orig = UniformGrid.intersect
+
+    def spy(self, o, d, counters=True):
+        seen.append(int(np.flatnonzero([np.array_equal(o, r.origins) for r in pool])[0]))
+        return orig(self, o, d, counters=counters)
+    monkeypatch.setattr(UniformGrid, "intersect", spy)
+    got = advise.time_structures(scene, [("grid", {"factor": 1.0})], pool, repeats=2, build_repeats=1, min_sample=0.0)
+    assert seen[:6] == [0, 1, 2, 0, 1, 2][:len(seen[:6])] and len(seen) >= 3
+    assert got["grid"]["rays"] == advise.PROBE_RAYS and got["grid"]["ray_s"] > 0
+    with pytest.raises(GridcostError, match="unequal sizes"):
+        short = pool[1]._replace(origins=pool[1].origins[:10], directions=pool[1].directions[:10])
+        advise.time_structures(scene, [("grid", {})], [pool[0], short], repeats=1, build_repeats=1)
 
 
 def test_check_scene_measures_every_candidate(load):

@@ -151,3 +151,14 @@ def test_advise_json_predicts_and_checks(run_cli, tmp_path):
     checked = [c for c in out["candidates"] if "measured_s" in c]
     assert len(checked) == 3 and all(c["measured_s"] > 0 for c in checked)
     assert (tmp_path / "advise" / "summary.md").exists()
+
+
+def test_trimesh_reference_rays_fit_the_memory_budget(monkeypatch):
+    """trimesh's tracer holds ~16 B per (ray, face): its rays are cut to the budget (dragon-871k at
+    2,000 rays was OOM-killed at 24 GB)."""
+    from experiments.tools import bench
+    monkeypatch.setenv("GRIDCOST_MEMORY_BUDGET", "12G")
+    assert bench.trimesh_ray_count(2000, 69_451) == 2000
+    assert bench.trimesh_ray_count(2000, 871_414) == 12 * 2**30 // (16 * 871_414) == 924
+    monkeypatch.setenv("GRIDCOST_MEMORY_BUDGET", "1G")
+    assert bench.trimesh_ray_count(2000, 871_414) < bench.TRIMESH_MIN_RAYS

@@ -7,10 +7,11 @@ the kd-tree and the BVH (and coherent grid packets for camera rays) — it predi
 R rays, build plus trace, with an interval, and picks the fastest:
 
 * **Grids** are probed, as Hapala 2011's decision algorithm does: built (wall clock, the median of
-  3 builds when cheap) and a sample of 20,000 rays traced (median of 5 interleaved rounds of every
+  3 builds when cheap) and samples of 20,000 rays traced (median of 5 interleaved rounds of every
   probed candidate after a warm-up: the steady state of a long run, and a busy phase of a shared
-  machine cannot reorder them; camera rays are whole 8x8 packets spread over a 200,000-pixel frame,
-  the frame a long run traces); the interval is the spread of the repeats, at least ±10 %.
+  machine cannot reorder them; each call traces the next of 10 disjoint sets, never a ray twice;
+  camera rays are runs of whole 8x8 packets spread over a 200,000-pixel frame, the frame a long run
+  traces: :func:`probe_pool`); the interval is the spread of the repeats, at least ±10 %.
 * **Hierarchies** (kd-tree, BVH) are probed with them when cheap: when the calibration's estimate
   of their build is at most 2 s. Above that they are predicted without building them, from a
   calibration on this host: table1h's measurements of a few small built-in scenes (stored like every
@@ -56,8 +57,10 @@ PROBE_BUILD_MAX_S = 2.0
 MIN_SAMPLE_S = 0.05
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
-#: camera probes: this many runs of consecutive packets, spread over the frame (:func:`probe_rays`)
-PROBE_RUNS = 39
+#: camera probes: this many runs of PACKETS_PER_RUN consecutive packets, spread over the frame (:func:`probe_pool`)
+PROBE_RUNS, PACKETS_PER_RUN = 39, 8
+#: disjoint probe sets of PROBE_RAYS each, traced in turn (:func:`probe_pool`)
+PROBE_SETS = 10
 
 
 def add_arguments(p) -> None:
@@ -95,28 +98,40 @@ def calibration(ctx, log) -> dict:
     return out
 
 
-def probe_rays(scene, kind: str, seed: int):
-    """The probes' rays: PROBE_RAYS of ``kind``. Camera rays are whole 8x8 packets from a frame of
-    CHECK_RAYS pixels (the frame --check and a long run trace), not a smaller frame: a packet's
-    coherence, and so a packet tracer's time per ray, depends on the frame's resolution. They are
-    PROBE_RUNS runs of consecutive packets spread evenly over the frame, each run traced in the
-    frame's order: a packet reuses the cells and triangles its neighbours loaded, as in a whole
-    frame. On particles-100k (grid, M = 8N) the whole frame in a shuffled packet order costs 1.27x its
-    time in order (same counts); 312 single packets picked evenly 1.18x; 8 runs of 39 packets 0.67x
-    (their counts 0.72x: too few places); 39 runs of 8 packets 0.97x, counts within 1 %."""
+def probe_pool(scene, kind: str, seed: int) -> list:
+    """The probes' rays: PROBE_SETS disjoint sets of PROBE_RAYS rays of ``kind``; a timed probe
+    traces the next set at each call (:func:`time_structures`), so it never traces a ray twice, as a
+    long run does not: repeating one set of 20,000 rays until a sample lasted MIN_SAMPLE_S let
+    their cells, nodes and triangles stay in the caches, and the probes of large scenes came out
+    16-35 % faster per ray than a long run (dragon-202k, room).
+
+    Camera rays are whole 8x8 packets from a frame of CHECK_RAYS pixels (the frame --check and a
+    long run trace), not a smaller frame: a packet's coherence, and so a packet tracer's time per ray,
+    depends on the frame's resolution. Each set is PROBE_RUNS runs of PACKETS_PER_RUN consecutive
+    packets spread evenly over the frame, traced in the frame's order (a packet reuses the cells and
+    triangles its neighbours loaded, as in a whole frame); set k starts k runs later, so the sets
+    cover the frame. On particles-100k (grid, M = 8N) the whole frame in a shuffled packet order
+    costs 1.27x its time in order (same counts); 312 single packets picked evenly 1.18x; 8 runs of
+    39 packets 0.67x (their counts 0.72x: too few places); 39 runs of 8 packets 0.97x, counts
+    within 1 %."""
     import numpy as np
     from tracer.rays import Rays, make_rays
     if kind != "camera":
-        return make_rays(scene, kind, PROBE_RAYS, seed=seed)
+        r = make_rays(scene, kind, PROBE_SETS * PROBE_RAYS, seed=seed)
+        return [Rays(np.ascontiguousarray(r.origins[k::PROBE_SETS]), np.ascontiguousarray(r.directions[k::PROBE_SETS]),
+                     kind, seed) for k in range(PROBE_SETS)]
     full = make_rays(scene, kind, CHECK_RAYS, seed=seed)
     n_tiles = full.n // PACKET
-    want = min(n_tiles, PROBE_RAYS // PACKET)
-    runs = min(PROBE_RUNS, want)
-    per = want // runs
-    starts = np.linspace(0, n_tiles - per, runs).astype(int)
-    pick = (starts[:, None] + np.arange(per)[None, :]).ravel()
-    idx = (pick[:, None] * PACKET + np.arange(PACKET)[None, :]).ravel()
-    return Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed)
+    runs = max(1, min(PROBE_RUNS, n_tiles // (PROBE_SETS * PACKETS_PER_RUN)))
+    per = min(PACKETS_PER_RUN, n_tiles // runs)
+    starts = (np.arange(runs) * (n_tiles // runs)).astype(int)
+    out = []
+    for k in range(PROBE_SETS):
+        first = np.minimum(starts + k * per, n_tiles - per)
+        pick = (first[:, None] + np.arange(per)[None, :]).ravel()
+        idx = (pick[:, None] * PACKET + np.arange(PACKET)[None, :]).ravel()
+        out.append(Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed))
+    return out
 
 
 def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN_SAMPLE_S) -> list[dict]:
@@ -127,7 +142,8 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
     timed in interleaved rounds, so a busy phase of a shared machine hits all of them alike and
     cannot reorder them); the other hierarchies are estimated from the calibration."""
     from costmodel.select import Selector
-    rays = probe_rays(scene, kind, seed)
+    pool = probe_pool(scene, kind, seed)
+    rays = pool[0]
     probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
               ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
     if kind == "camera":
@@ -144,7 +160,7 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
                     "rel_build": rel["build"], "rel_ray": rel["ray"]})
-    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], rays, repeats=5, build_repeats=None,
+    got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], pool, repeats=5, build_repeats=None,
                           min_sample=min_sample)
     for structure, params, how in probed:
         g = got[structure]
@@ -167,18 +183,33 @@ def with_totals(cands: list[dict], R: float) -> list[dict]:
     return sorted(out, key=lambda c: c["predicted_s"])
 
 
+def _cycling(accel, pool):
+    """A trace of the next ray set of ``pool`` at each call (so repeated calls trace fresh rays)."""
+    calls = [0]
+
+    def trace():
+        r = pool[calls[0] % len(pool)]
+        calls[0] += 1
+        accel.intersect(r.origins, r.directions, counters=False)
+    return trace
+
+
 def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: int | None = 5,
                     min_sample: float = MIN_SAMPLE_S) -> dict:
-    """Build and time ``structures`` [(structure, params), …] on ``rays``: build seconds = median of
+    """Build and time ``structures`` [(structure, params), …] on ``rays`` (one ray set, or a list of
+    equal-sized sets traced in turn, one per call: :func:`probe_pool`): build seconds = median of
     ``build_repeats`` builds after a warm-up (wall clock; None: 3 builds when one takes under
     PROBE_REBUILD_S, else 1), per-ray seconds = median over ``repeats`` interleaved rounds of tracing
-    all the rays with every structure (:func:`tracer.timing.time_paired`, default clock), so a busy
+    a ray set with every structure (:func:`tracer.timing.time_paired`, default clock), so a busy
     phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s,
     build_spread, ray_spread (relative: (max - min) / median), rays}."""
     import numpy as np
     from tracer.accel import build
     from tracer.timing import build_clock, time_paired
-    o, d = rays.origins, rays.directions
+    pool = list(rays) if isinstance(rays, list) else [rays]  # (a Rays is a NamedTuple)
+    n_rays = pool[0].n
+    if any(r.n != n_rays for r in pool):
+        raise GridcostError(f"time_structures: ray sets of unequal sizes {sorted({r.n for r in pool})}")
     accs, builds = {}, {}
     for structure, params in structures:
         t0 = build_clock()
@@ -191,14 +222,14 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
             build(scene, structure, **params)
             ts.append(build_clock() - t0)
         builds[structure] = np.asarray(ts)
-    tm = time_paired({k: (lambda a=a: a.intersect(o, d, counters=False)) for k, a in accs.items()},
+    tm = time_paired({k: _cycling(a, pool) for k, a in accs.items()},
                      rounds=max(1, repeats), repeats=1, min_sample=min_sample)
     out = {}
     for k in accs:
         b, t = builds[k], np.asarray(tm[k])
-        out[k] = {"build_s": float(np.median(b)), "ray_s": float(np.median(t)) / rays.n,
+        out[k] = {"build_s": float(np.median(b)), "ray_s": float(np.median(t)) / n_rays,
                   "build_spread": float(np.ptp(b) / np.median(b)), "ray_spread": float(np.ptp(t) / np.median(t)),
-                  "rays": rays.n}
+                  "rays": n_rays}
     return out
 
 

@@ -19,6 +19,7 @@ from experiments.core.common import add_scene_args, emit_json, scene_from_args
 from experiments.core.store import atomic_write, write_json
 from experiments.core.common import progress
 from tracer.accel import build
+from tracer.memory import memory_budget
 from tracer.rays import make_rays
 from tracer.timing import build_clock, host_info, set_threads, time_call
 
@@ -44,6 +45,19 @@ VARIANTS = {
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
+
+
+#: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
+#: about all of them for a ray across the mesh (2,000 rays on dragon-871k reached 24 GB and were
+#: killed); the rays given to it are cut to the memory budget (:func:`trimesh_ray_count`)
+TRIMESH_BYTES_PER_PAIR = 16
+TRIMESH_MIN_RAYS = 100
+
+
+def trimesh_ray_count(wanted: int, n_faces: int) -> int:
+    """Rays for trimesh's tracer: ``wanted``, fewer when TRIMESH_BYTES_PER_PAIR x rays x faces would
+    exceed the memory budget (:func:`tracer.memory.memory_budget`)."""
+    return int(min(wanted, memory_budget() // (TRIMESH_BYTES_PER_PAIR * max(n_faces, 1))))
 
 
 def add_arguments(p) -> None:
@@ -79,7 +93,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
     from experiments.core.store import git_commit
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
-           "git_commit": git_commit(), "host": host_info(), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+           "git_commit": git_commit(), "host": host_info(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
            "structures": {}, "unavailable": {}}
     for name in progress(names, f"bench {scene.name}", quiet=log is not print, unit="structure"):
         t0 = time.perf_counter()
@@ -91,15 +105,19 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             row["robust"] = False
             row["threads"] = 1
         elif name == "trimesh":
-            step = {k: max(1, r.n // trimesh_rays) for k, r in rays.items()}  # spread over the image
-            small = {k: r._replace(origins=r.origins[::step[k]][:trimesh_rays],
-                                   directions=r.directions[::step[k]][:trimesh_rays])
-                     for k, r in rays.items()}
             if not TrimeshAccel.available():
                 out["unavailable"][name] = "trimesh's ray tracer needs rtree (pip install rtree)"
                 continue
+            k_rays = trimesh_ray_count(trimesh_rays, scene.n)
+            if k_rays < TRIMESH_MIN_RAYS:
+                out["unavailable"][name] = (f"trimesh's tracer would need about {TRIMESH_BYTES_PER_PAIR * TRIMESH_MIN_RAYS * scene.n / 2**30:.1f} GiB "
+                                            f"for {TRIMESH_MIN_RAYS} rays on {scene.n:,} faces (budget {memory_budget() / 2**30:.1f} GiB)")
+                continue
+            step = {k: max(1, r.n // k_rays) for k, r in rays.items()}  # spread over the image
+            small = {k: r._replace(origins=r.origins[::step[k]][:k_rays], directions=r.directions[::step[k]][:k_rays])
+                     for k, r in rays.items()}
             row = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
-            row["rays"] = trimesh_rays
+            row["rays"] = k_rays
         elif name in VARIANTS:
             struct, params = VARIANTS[name]
             row = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
@@ -125,6 +143,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
     out["paired"] = _paired(scene, rays, s, threads, log)
+    out["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     return out
 
 
@@ -199,7 +218,9 @@ def _summary_all(folder) -> str:
         sec = _summary(out).replace("# bench:", "## bench:", 1).split("\n")
         host = out.get("host") or {}
         sec.insert(1, f"\nMeasured by commit {out.get('git_commit', 'unknown (before bench recorded it)')} on "
-                      f"{host.get('host', '?')} ({host.get('cpu', '?')}), finished {out.get('finished', '?')}.")
+                      f"{host.get('host', '?')} ({host.get('cpu', '?')}), "
+                      + (f"{out['started']} – {out['finished']}." if "started" in out
+                         else f"started {out.get('finished', '?')} (files before the fix record the start as 'finished')."))
         parts += [""] + sec
     return "\n".join(parts).rstrip("\n") + "\n"
 
