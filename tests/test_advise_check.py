@@ -26,27 +26,33 @@ def _cal(T):
     return {k: {h: (_FixedEstimator(T, 1e-7), rel) for h in ("kdtree", "bvh")} for k in ("random", "path")}
 
 
-def test_probe_pool_sets_are_disjoint_whole_packets_of_the_full_frame(load):
+def test_probe_pool_is_the_full_frame_in_consecutive_pieces(load):
     from tracer.rays import make_rays
     scene = load("bunny-948")
     full = make_rays(scene, "camera", advise.CHECK_RAYS, seed=0)
     pool = advise.probe_pool(scene, "camera", 0)
-    per, runs = advise.PACKETS_PER_RUN, advise.PROBE_RUNS
-    assert len(pool) == advise.PROBE_SETS and all(r.n == runs * per * advise.PACKET and r.kind == "camera" for r in pool)
-    fb = full.directions[: full.n // advise.PACKET * advise.PACKET].reshape(-1, advise.PACKET, 3)
-    key = {fb[i].tobytes(): i for i in range(len(fb))}
-    where = [np.array([key[b.tobytes()] for b in r.directions.reshape(-1, advise.PACKET, 3)]) for r in pool]
-    for k, w in enumerate(where):
-        # PROBE_RUNS runs of consecutive packets of the frame, in the frame's order, spread over it
-        runs_of = w.reshape(runs, per)
-        assert (np.diff(runs_of, axis=1) == 1).all() and (np.diff(runs_of[:, 0]) > per).all()
-        assert runs_of[0, 0] == k * per and runs_of[-1, 0] > 0.9 * len(fb)
-    # the sets are disjoint and together cover the frame
-    every = np.concatenate(where)
-    assert len(np.unique(every)) == len(every) and len(every) > 0.99 * len(fb)
+    per = advise.PROBE_RAYS // advise.PACKET * advise.PACKET
+    assert len(pool) == advise.PROBE_SETS and all(r.n == per and r.kind == "camera" for r in pool)
+    # the frame's rays in its own (8x8 packet) order, cut into consecutive whole-packet pieces
+    np.testing.assert_array_equal(np.concatenate([r.directions for r in pool]), full.directions[:per * len(pool)])
+    assert per * len(pool) > 0.99 * full.n
     rnd = advise.probe_pool(scene, "random", 0)
     assert len(rnd) == advise.PROBE_SETS and all(r.n == advise.PROBE_RAYS for r in rnd)
-    assert not np.array_equal(rnd[0].directions, rnd[1].directions)
+    every = np.concatenate([r.origins for r in rnd])
+    assert len(np.unique(every, axis=0)) == len(every)  # disjoint: no ray traced twice
+
+
+def test_check_truth_on_camera_rays_is_another_frame_of_the_same_view(load, monkeypatch):
+    scene = load("bunny-948")
+    seen = {}
+    monkeypatch.setattr(advise, "time_structures", lambda sc, st, rays, *a: seen.setdefault("rays", rays))
+    advise.measure(scene, "camera", [("grid", {})], 4096, seed=0)
+    probe = np.concatenate([r.directions for r in advise.probe_pool(scene, "camera", 0)])
+    truth = seen["rays"]
+    assert truth.n == 4096 and truth.kind == "camera"
+    probe_set = {row.tobytes() for row in probe}
+    assert not any(row.tobytes() in probe_set for row in truth.directions)  # jittered: none of the probes' rays
+    np.testing.assert_allclose(truth.origins[0], advise.probe_pool(scene, "camera", 0)[0].origins[0])
 
 
 def test_time_structures_traces_the_next_set_at_each_call(load, monkeypatch):

@@ -10,8 +10,9 @@ R rays, build plus trace, with an interval, and picks the fastest:
   3 builds when cheap) and samples of 20,000 rays traced (median of 5 interleaved rounds of every
   probed candidate after a warm-up: the steady state of a long run, and a busy phase of a shared
   machine cannot reorder them; each call traces the next of 10 disjoint sets, never a ray twice;
-  camera rays are runs of whole 8x8 packets spread over a 200,000-pixel frame, the frame a long run
-  traces: :func:`probe_pool`); the interval is the spread of the repeats, at least ±10 %.
+  camera rays are the 200,000-pixel frame a long run traces, in consecutive pieces of whole 8x8
+  packets, in the frame's order: :func:`probe_pool`); the interval is the spread of the repeats, at
+  least ±10 %.
 * **Hierarchies** (kd-tree, BVH) are probed with them when cheap: when the calibration's estimate
   of their build is at most 2 s. Above that they are predicted without building them, from a
   calibration on this host: table1h's measurements of a few small built-in scenes (stored like every
@@ -57,8 +58,6 @@ PROBE_BUILD_MAX_S = 2.0
 MIN_SAMPLE_S = 0.05
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
-#: camera probes: this many runs of PACKETS_PER_RUN consecutive packets, spread over the frame (:func:`probe_pool`)
-PROBE_RUNS, PACKETS_PER_RUN = 39, 8
 #: disjoint probe sets of PROBE_RAYS each, traced in turn (:func:`probe_pool`)
 PROBE_SETS = 10
 
@@ -103,17 +102,16 @@ def probe_pool(scene, kind: str, seed: int) -> list:
     traces the next set at each call (:func:`time_structures`), so it never traces a ray twice, as a
     long run does not: repeating one set of 20,000 rays until a sample lasted MIN_SAMPLE_S let
     their cells, nodes and triangles stay in the caches, and the probes of large scenes came out
-    16-35 % faster per ray than a long run (dragon-202k, room).
+    13-20 % faster per ray than a long run (dragon-202k, room).
 
-    Camera rays are whole 8x8 packets from a frame of CHECK_RAYS pixels (the frame --check and a
-    long run trace), not a smaller frame: a packet's coherence, and so a packet tracer's time per ray,
-    depends on the frame's resolution. Each set is PROBE_RUNS runs of PACKETS_PER_RUN consecutive
-    packets spread evenly over the frame, traced in the frame's order (a packet reuses the cells and
-    triangles its neighbours loaded, as in a whole frame); set k starts k runs later, so the sets
-    cover the frame. On particles-100k (grid, M = 8N) the whole frame in a shuffled packet order
-    costs 1.27x its time in order (same counts); 312 single packets picked evenly 1.18x; 8 runs of
-    39 packets 0.67x (their counts 0.72x: too few places); 39 runs of 8 packets 0.97x, counts
-    within 1 %."""
+    Camera rays are the frame of CHECK_RAYS pixels (the frame --check and a long run trace, not a
+    smaller one: a packet's coherence depends on the resolution) cut into PROBE_SETS consecutive
+    pieces of whole 8x8 packets, traced in turn: the frame in its own order, so each packet finds
+    what its neighbours loaded in the caches, as in a long run. Per-ray time of the probe over the
+    whole frame's, measured on particles-100k and dragon-202k (grid at 8N, BVH, packets): consecutive
+    pieces 0.98-1.08; one set of 39 runs of 8 packets spread over the frame and repeated 0.81-1.05
+    (repeated rays stay in the caches); 10 such sets in turn 1.07-1.26 (a run's neighbours were
+    evicted since); the whole frame with its packets shuffled 1.27 (particles-100k, grid)."""
     import numpy as np
     from tracer.rays import Rays, make_rays
     if kind != "camera":
@@ -121,17 +119,9 @@ def probe_pool(scene, kind: str, seed: int) -> list:
         return [Rays(np.ascontiguousarray(r.origins[k::PROBE_SETS]), np.ascontiguousarray(r.directions[k::PROBE_SETS]),
                      kind, seed) for k in range(PROBE_SETS)]
     full = make_rays(scene, kind, CHECK_RAYS, seed=seed)
-    n_tiles = full.n // PACKET
-    runs = max(1, min(PROBE_RUNS, n_tiles // (PROBE_SETS * PACKETS_PER_RUN)))
-    per = min(PACKETS_PER_RUN, n_tiles // runs)
-    starts = (np.arange(runs) * (n_tiles // runs)).astype(int)
-    out = []
-    for k in range(PROBE_SETS):
-        first = np.minimum(starts + k * per, n_tiles - per)
-        pick = (first[:, None] + np.arange(per)[None, :]).ravel()
-        idx = (pick[:, None] * PACKET + np.arange(PACKET)[None, :]).ravel()
-        out.append(Rays(np.ascontiguousarray(full.origins[idx]), np.ascontiguousarray(full.directions[idx]), kind, seed))
-    return out
+    per = max(1, min(PROBE_RAYS // PACKET, full.n // PACKET // PROBE_SETS)) * PACKET
+    return [Rays(np.ascontiguousarray(full.origins[k * per:(k + 1) * per]),
+                 np.ascontiguousarray(full.directions[k * per:(k + 1) * per]), kind, seed) for k in range(PROBE_SETS)]
 
 
 def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN_SAMPLE_S) -> list[dict]:
@@ -236,10 +226,17 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
 def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0,
             min_sample: float = MIN_SAMPLE_S) -> dict:
     """The measured truth of ``structures`` on ``n_rays`` fresh rays of ``kind`` (seed + 1: other
-    rays than the probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
-    from tracer.rays import make_rays
-    return time_structures(scene, structures, make_rays(scene, kind, int(n_rays), seed=seed + 1), repeats, repeats,
-                           min_sample)
+    rays than the probes'; camera rays: the probes' view and resolution with every pixel's ray
+    jittered inside the pixel, as a renderer's next frame, since the unjittered frame is the
+    probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
+    import numpy as np
+    from tracer.rays import camera_rays, make_rays
+    if kind == "camera":
+        side = max(1, int(round(np.sqrt(n_rays))))
+        rays = camera_rays(scene, side, max(1, int(n_rays) // side), seed=seed + 1, jitter=True)
+    else:
+        rays = make_rays(scene, kind, int(n_rays), seed=seed + 1)
+    return time_structures(scene, structures, rays, repeats, repeats, min_sample)
 
 
 def _check(scene, kind, R, cands, seed) -> None:

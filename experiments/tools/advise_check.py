@@ -44,7 +44,7 @@ PICK_TOL, PRED_TOL = 0.10, 0.20
 def add_arguments(p) -> None:
     p.add_argument("--scenes", default=None, help="comma-separated scenes (default: the four unseen meshes)")
     p.add_argument("--rays", type=int, default=None, help=f"rays the truth is measured on (default "
-                   f"{advise.CHECK_RAYS}, the frame the camera probes are taken from)")
+                   f"{advise.CHECK_RAYS}: camera rays a jittered frame of the resolution the camera probes trace)")
     p.add_argument("--repeats", type=int, default=None, help="builds and interleaved rounds (default 5; --quick 3)")
     p.add_argument("--seed", type=int, default=0)
 
@@ -119,7 +119,7 @@ def main(ctx, args) -> int:
     threads = set_threads(args.threads or 1)
     meshes = QUICK_MESHES if args.quick else MESHES
     names = [s.strip() for s in args.scenes.split(",")] if args.scenes else list(meshes)
-    n_rays = args.rays or advise.CHECK_RAYS  # the probe's frame: a packet's coherence depends on it
+    n_rays = args.rays or advise.CHECK_RAYS  # the probes' resolution: a packet's coherence depends on it
     repeats = args.repeats or (3 if args.quick else 5)
     cal = advise.calibration(ctx, print if not args.json else (lambda *a: None))
     rows, cands = [], []
