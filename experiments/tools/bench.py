@@ -47,6 +47,10 @@ VARIANTS = {
 }
 
 
+#: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
+PAIRED = ("grid", "kdtree-fast", "bvh4", "cgt")
+
+
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
 #: about all of them for a ray across the mesh (2,000 rays on dragon-871k reached 24 GB and were
 #: killed); the rays given to it are cut to the memory budget (:func:`trimesh_ray_count`)
@@ -70,7 +74,8 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
-def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> dict:
+def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, object]:
+    """(row of build time, Mrays/s and counters per ray kind, the built structure)."""
     t_build = time_call(accel_fn, repeats=3 if repeats > 1 else 1, warmup=0, clock=build_clock)
     accel = accel_fn()
     row = {"build_s": t_build.median}
@@ -83,7 +88,7 @@ def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> dict:
             row[f"{kind}_per_ray"] = {k: round(v, 3) for k, v in cnt.mean().items()}
     st = accel.stats()
     row["stats"] = {k: v for k, v in st.items() if isinstance(v, (int, float, bool, str))}
-    return row
+    return row, accel
 
 
 def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print) -> dict:
@@ -95,13 +100,14 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     out = {"scene": scene.name, "faces": scene.n, "threads": threads, "rays": n_rays, "repeats": repeats,
            "git_commit": git_commit(), "host": host_info(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
            "structures": {}, "unavailable": {}}
+    kept = {}  # the structures the paired rounds time again (PAIRED and Embree), as built above
     for name in progress(names, f"bench {scene.name}", quiet=log is not print, unit="structure"):
         t0 = time.perf_counter()
         if name == "embree":
             if not EmbreeAccel.available():
                 out["unavailable"][name] = "embreex not installed (pip install 'gridcost[embree]')"
                 continue
-            row = _bench_one(lambda: EmbreeAccel().build(scene), rays, repeats, counters=False)
+            row, kept[name] = _bench_one(lambda: EmbreeAccel().build(scene), rays, repeats, counters=False)
             row["robust"] = False
             row["threads"] = 1
         elif name == "trimesh":
@@ -116,11 +122,13 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             step = {k: max(1, r.n // k_rays) for k, r in rays.items()}  # spread over the image
             small = {k: r._replace(origins=r.origins[::step[k]][:k_rays], directions=r.directions[::step[k]][:k_rays])
                      for k, r in rays.items()}
-            row = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
+            row, _ = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
             row["rays"] = k_rays
         elif name in VARIANTS:
             struct, params = VARIANTS[name]
-            row = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
+            row, accel = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
+            if name in PAIRED:
+                kept[name] = accel
             row["params"] = params
         else:
             from tracer.errors import GridcostError
@@ -142,30 +150,25 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
     if "trimesh" in s and "grid" in s:
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
-    out["paired"] = _paired(scene, rays, s, threads, log)
+    out["paired"] = _paired(rays, kept, threads, log)
     out["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     return out
 
 
-#: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "cgt")
-
-
-def _paired(scene, rays, s, threads, log, rounds: int = 7) -> dict:
+def _paired(rays, kept, threads, log, rounds: int = 7) -> dict:
     """The headline ratios measured in interleaved rounds (:func:`tracer.timing.time_paired`): each of
     :data:`PAIRED` that ran against Embree (all one thread, in the same rounds), and the grid's scaling
     from 1 to ``threads`` threads (wall time for both). Median, min and max of the per-round ratios."""
     import numba
 
-    from tracer.reference import EmbreeAccel
     from tracer.timing import paired_ratio, time_paired
     out = {}
-    if "grid" not in s:
+    if "grid" not in kept:
         return out
-    accels = {name: build(scene, *VARIANTS[name][:1], **VARIANTS[name][1]) for name in PAIRED if name in s}
+    accels = {name: kept[name] for name in PAIRED if name in kept}
     grid = accels["grid"]
-    if "embree" in s and threads == 1:
-        emb = EmbreeAccel().build(scene)
+    if "embree" in kept and threads == 1:
+        emb = kept["embree"]
         for kind, r in rays.items():
             fns = {name: (lambda a=a: a.intersect(r.origins, r.directions, counters=False)) for name, a in accels.items()}
             fns["embree"] = lambda: emb.intersect(r.origins, r.directions, counters=False)
