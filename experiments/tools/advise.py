@@ -28,6 +28,7 @@ scaled) and prints measured beside predicted.
 """
 from __future__ import annotations
 
+import itertools
 import time
 
 import pandas as pd
@@ -175,11 +176,10 @@ def with_totals(cands: list[dict], R: float) -> list[dict]:
 
 def _cycling(accel, pool):
     """A trace of the next ray set of ``pool`` at each call (so repeated calls trace fresh rays)."""
-    calls = [0]
+    sets = itertools.cycle(pool)
 
     def trace():
-        r = pool[calls[0] % len(pool)]
-        calls[0] += 1
+        r = next(sets)
         accel.intersect(r.origins, r.directions, counters=False)
     return trace
 
