@@ -216,10 +216,13 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     scene = load_scene("bunny-948")
     rays = {"random": make_rays(scene, "random", 3000, seed=0)}
     store = RunContext(out=tmp_path).store()
-    # 7 interleaved rounds: with 3, a burst of load on a shared machine once moved the median ratio to 0.43
+    # 7 interleaved rounds: with 3, a burst of load on a shared machine once moved the median ratio to
+    # 0.43; with 7, a benchmark running beside the test suite on 2 cores moved it to 0.61. The bounds
+    # check the pairing (the reference against itself, not against another grid: the one-cell grid
+    # below is > 3x), not this machine's timing noise, which a unit test must not depend on.
     rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
     ref, one = rows
-    assert 0.8 < ref["ratio_to_ref"] < 1.25
+    assert 0.5 < ref["ratio_to_ref"] < 2.0
     assert one["ratio_to_ref"] > 3  # one cell: every ray tests every triangle
     anchor = ref["anchored_seconds"] / ref["ratio_to_ref"]
     assert one["anchored_seconds"] == pytest.approx(one["ratio_to_ref"] * anchor)
