@@ -9,6 +9,9 @@ calibrating the structure it predicts").
   median time per ray of the non-counting kernel (warm-up first, ``repeats`` timed runs).
 * :func:`fit_sah_constants` — both together: the fitted estimator for ``build(scene, "kdtree",
   constants=fit)``.
+* :class:`BvhSahFit` / :func:`fit_bvh_trav_cost` — the same for the BVH's SAH: the binary BVH's time
+  per ray fitted to its counters per ray kind, ``trav_cost_`` = C_trav / C_isect for
+  ``build(scene, "bvh" | "bvh4", trav_cost=fit.trav_cost_)`` (pbrt-v2's setting is 1/8).
 """
 from __future__ import annotations
 
@@ -69,11 +72,12 @@ class KdCostFit:
 
 
 def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTINGS, n_rays: int = 50_000,
-                      repeats: int = 5, seed: int = 0, clock=None) -> list[dict]:
-    """One point per (scene, ray kind, kd-tree build setting): per-ray means of the counters and the
-    median seconds per ray of the non-counting kernel (:func:`tracer.timing.time_call`, warm-up
-    first; ``clock`` as :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded
-    machine). ``scenes`` are Scene objects or registry names. Run it single-threaded."""
+                      repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree") -> list[dict]:
+    """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
+    per-ray means of the counters and the median seconds per ray of the non-counting kernel
+    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` as :func:`tracer.timing.time_call`'s,
+    e.g. ``time.thread_time`` on a loaded machine). ``scenes`` are Scene objects or registry names.
+    Run it single-threaded."""
     from tracer.accel import build
     from tracer.rays import make_rays
     from tracer.scene import load_scene
@@ -83,7 +87,7 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
         scene = load_scene(sc) if isinstance(sc, str) else sc
         rays = {k: make_rays(scene, k, n_rays, seed=seed) for k in kinds}
         for params in settings:
-            kd = build(scene, "kdtree", **params)
+            kd = build(scene, structure, **params)
             for kind, r in rays.items():
                 _, cnt = kd.intersect(r.origins, r.directions, counters=True)
                 tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats, clock=clock)
@@ -104,3 +108,53 @@ def fit_sah_constants(scenes=("bunny-16k", "dragon-48k", "bunny-69k"), points=No
     fit = KdCostFit().fit(X, y)
     fit.points_ = pts
     return fit
+
+
+#: binary-BVH build settings measured by default: trees of different shapes (the SAH's traversal
+#: weight, leaf sizes) so node and test counts vary independently
+BVH_SETTINGS = ({}, {"trav_cost": 0.5}, {"trav_cost": 2.0}, {"max_leaf": 1}, {"max_leaf": 8, "trav_cost": 1.0})
+#: calibration meshes of :func:`fit_bvh_trav_cost`: small scans and a CAD part, none of the meshes
+#: issue 15's bench reports
+BVH_CALIBRATION = ("bunny-16k", "dragon-11k", "fandisk")
+
+
+class BvhSahFit:
+    """The BVH's SAH traversal weight measured on this machine. Per ray kind, T/ray = c_node nodes +
+    c_test tests (non-negative least squares on relative residuals; no intercept and no leaf term:
+    on one or three calibration meshes those made the fit collinear, a node or a test coming out
+    free, while the two-term fit stays within 1-8 % MAPE); a coherent kind (camera) pays less per node
+    than an incoherent one (random), so the kinds are fitted apart and ``trav_cost_`` = C_trav /
+    C_isect is the geometric mean of their c_node / c_test (the SAH needs only the ratio).
+    Fitted: ``c_node_``, ``c_test_``, ``mape_``, ``ratios_`` (dicts by kind), ``trav_cost_``."""
+
+    def fit(self, points):
+        self.c_node_, self.c_test_, self.mape_, self.ratios_ = {}, {}, {}, {}
+        for kind in dict.fromkeys(p["kind"] for p in points):
+            pk = [p for p in points if p["kind"] == kind]
+            A = np.array([[p["nodes"], p["tests"]] for p in pk], float)
+            y = np.array([p["s_per_ray"] for p in pk]) * 1e9
+            (cn, ct), _ = nnls(A / y[:, None], np.ones(len(y)))
+            if not (cn > 1e-6 * ct and ct > 1e-6 * cn):  # a cost a millionth of the other's is none
+                from tracer.errors import GridcostError
+                raise GridcostError(f"BVH cost fit ({kind} rays): a node or a test came out free "
+                                    f"(c_node {cn:.3g}, c_test {ct:.3g} ns); calibrate on more or larger meshes")
+            self.c_node_[kind], self.c_test_[kind], self.ratios_[kind] = float(cn), float(ct), float(cn / ct)
+            self.mape_[kind] = _metrics(y, A @ np.array([cn, ct]))["mape"]
+        self.trav_cost_ = float(np.exp(np.mean(np.log(list(self.ratios_.values())))))
+        self.points_ = points
+        return self
+
+    def summary(self) -> dict:
+        return {"trav_cost": self.trav_cost_, "points": len(self.points_),
+                "scenes": sorted({p["scene"] for p in self.points_}),
+                **{f"{k}_{name}": d[k] for k in self.ratios_
+                   for name, d in (("c_node_ns", self.c_node_), ("c_test_ns", self.c_test_), ("ratio", self.ratios_),
+                                   ("mape", self.mape_))}}
+
+
+def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, **measure) -> BvhSahFit:
+    """Measure the binary BVH at :data:`BVH_SETTINGS` on ``scenes`` (or take ``points`` from
+    :func:`measure_kd_points` with ``structure="bvh"``) and fit :class:`BvhSahFit`."""
+    pts = points if points is not None else measure_kd_points(
+        scenes, settings=measure.pop("settings", BVH_SETTINGS), structure="bvh", **measure)
+    return BvhSahFit().fit(pts)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 import pytest
 
 from tracer.reference import EmbreeAccel
@@ -46,7 +48,8 @@ def test_verify_text_output(run_cli):
 def test_bench_json(run_cli, tmp_path):
     out_dir = tmp_path / "results"
     out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",
-                        "--structures", "grid,bvh4,embree", "--threads", "1", "--json", "--out", str(out_dir)))
+                        "--structures", "grid,bvh4,bvh4-sah-fit,embree", "--threads", "1", "--sah-scenes", "bunny-948",
+                        "--json", "--out", str(out_dir)))
     assert out["scene"] == "bunny-948" and out["faces"] == 948 and out["rays"] == 5000
     grid = out["structures"]["grid"]
     for key in ("build_s", "random_mrays", "camera_mrays"):
@@ -58,6 +61,12 @@ def test_bench_json(run_cli, tmp_path):
     assert out["git_commit"] and out["host"]["cpu"]
     summary = (out_dir / "bench" / "summary.md").read_text()
     assert "## bench: bunny-948" in summary and f"Measured by commit {out['git_commit']}" in summary
+    # the BVH4 built with the SAH weight fitted in this run, on the calibration mesh asked for
+    fit = out["bvh_sah_fit"]
+    assert fit["scenes"] == ["bunny-948"] and fit["trav_cost"] > 0
+    assert fit["trav_cost"] == pytest.approx(np.sqrt(fit["random_ratio"] * fit["camera_ratio"]))
+    assert out["structures"]["bvh4-sah-fit"]["params"] == {"trav_cost": fit["trav_cost"]}
+    assert f"C_trav/C_isect = {fit['trav_cost']:.3f}" in summary
     if not EmbreeAccel.available():
         assert "embree" in out["unavailable"]
         pytest.skip("embreex is not installed: Embree assertions skipped")
@@ -69,7 +78,7 @@ def test_bench_json(run_cli, tmp_path):
     # Embree traces on one thread: more of ours are compared per thread, and the name says so
     assert ("per thread" in key) == (out["threads"] > 1)
     # the headline structures that ran are paired with Embree in the same rounds
-    assert set(out["paired"]) == {"grid/embree", "bvh4/embree"}
+    assert set(out["paired"]) == {"grid/embree", "bvh4/embree", "bvh4-sah-fit/embree"}
     for v in out["paired"].values():
         assert set(v) == {"random", "camera"} and all(0 < k["min"] <= k["ratio"] <= k["max"] for k in v.values())
     assert "| bvh4/embree | " in summary

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 from conftest import assert_agrees_exactly, transformed_scene
 
-from costmodel.kdcost import KdCostFit, fit_sah_constants, kd_time_per_ray
+from costmodel.kdcost import BvhSahFit, KdCostFit, fit_bvh_trav_cost, fit_sah_constants, kd_time_per_ray
 from tracer import build
+from tracer.errors import GridcostError
 from tracer.oracle import oracle_intersect
 from tracer.rays import KINDS, make_rays
 from tracer.scene import Scene, load_scene
@@ -115,3 +116,27 @@ def test_cost_fit_recovers_known_constants():
     assert f2.ti_over_tt_ == pytest.approx(5.0, rel=1e-6)
     kd = build(scene("cornell"), "kdtree", constants=f2, clip=True)
     assert kd.stats()["params"]["isect_cost"] == pytest.approx(5.0) and kd.stats()["params"]["trav_cost"] == 1.0
+
+
+def test_bvh_sah_fit_recovers_the_weight_per_kind():
+    """Synthetic points with c_node / c_test = 2 (random) and 0.5 (camera): each kind's ratio comes
+    back, and the weight is their geometric mean, 1."""
+    rng = np.random.default_rng(1)
+    pts = []
+    for kind, cn, ct in (("random", 20.0, 10.0), ("camera", 6.0, 12.0)):
+        for _ in range(12):
+            nodes, tests = rng.uniform(10, 60), rng.uniform(1, 10)
+            pts.append({"scene": "s", "kind": kind, "nodes": nodes, "leaves": 1.0, "tests": tests,
+                        "s_per_ray": (cn * nodes + ct * tests) * 1e-9})
+    fit = fit_bvh_trav_cost(points=pts)
+    assert fit.ratios_["random"] == pytest.approx(2.0, rel=1e-6) and fit.ratios_["camera"] == pytest.approx(0.5, rel=1e-6)
+    assert fit.trav_cost_ == pytest.approx(1.0, rel=1e-6) and fit.mape_["random"] == pytest.approx(0.0, abs=1e-6)
+    assert fit.summary()["camera_c_test_ns"] == pytest.approx(12.0, rel=1e-6)
+
+
+def test_bvh_sah_fit_refuses_a_free_test():
+    """Times that do not grow with the tests (c_test fitted 0) give a clear error, not a zero weight."""
+    pts = [{"scene": "s", "kind": "random", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": 5e-9 * n}
+           for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
+    with pytest.raises(GridcostError, match="came out free"):
+        BvhSahFit().fit(pts)

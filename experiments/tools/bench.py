@@ -42,13 +42,16 @@ VARIANTS = {
     "bvh": ("bvh", {}),
     "bvh-sign": ("bvh", {"order": "sign"}),
     "bvh4": ("bvh4", {}),
+    # the SAH's traversal weight measured on this machine in the same run (costmodel.kdcost.BvhSahFit:
+    # the binary BVH's time fitted to its counters on small calibration meshes), not pbrt's 1/8
+    "bvh4-sah-fit": ("bvh4", {"trav_cost": "fitted"}),
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
 
 
 #: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "cgt")
+PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "cgt")
 
 
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
@@ -72,6 +75,9 @@ def add_arguments(p) -> None:
                    help="comma-separated variants to run")
     p.add_argument("--trimesh-rays", type=int, default=2000, help="rays for trimesh's tracer")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sah-scenes", default=None,
+                   help="meshes bvh4-sah-fit calibrates the BVH's SAH weight on (default: "
+                        "costmodel.kdcost.BVH_CALIBRATION, none of them a bench mesh)")
 
 
 def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, object]:
@@ -91,7 +97,23 @@ def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, ob
     return row, accel
 
 
-def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print) -> dict:
+def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
+    """``params`` with a "fitted" trav_cost replaced by the BVH SAH weight measured in this run (once;
+    its summary and seconds go to ``out["bvh_sah_fit"]``)."""
+    if params.get("trav_cost") != "fitted":
+        return params
+    if "bvh_sah_fit" not in out:
+        from costmodel.kdcost import BVH_CALIBRATION, fit_bvh_trav_cost
+        t0 = time.perf_counter()
+        fit = fit_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
+        out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
+        log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
+            f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)")
+    return {**params, "trav_cost": out["bvh_sah_fit"]["trav_cost"]}
+
+
+def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print,
+              sah_scenes=None) -> dict:
     from tracer.reference import EmbreeAccel, TrimeshAccel
     threads = set_threads(threads)
     rays = {"random": make_rays(scene, "random", n_rays, seed=seed),
@@ -126,6 +148,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             row["rays"] = k_rays
         elif name in VARIANTS:
             struct, params = VARIANTS[name]
+            params = _fitted_params(params, out, sah_scenes, log)
             row, accel = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
             if name in PAIRED:
                 kept[name] = accel
@@ -196,7 +219,8 @@ def main(ctx, args) -> int:
     names = [n.strip() for n in args.structures.split(",") if n.strip()]
     log = (lambda *a, **k: None) if args.json else print
     log(f"bench {scene.name}: {scene.n:,} faces, {args.rays:,} rays per kind, threads={args.threads or 'all'}")
-    out = run_bench(scene, names, args.rays, max(1, args.repeats), args.threads, args.trimesh_rays, args.seed, log)
+    sah = [n.strip() for n in args.sah_scenes.split(",") if n.strip()] if args.sah_scenes else None
+    out = run_bench(scene, names, args.rays, max(1, args.repeats), args.threads, args.trimesh_rays, args.seed, log, sah)
     write_json(f"{args.out}/bench/{scene.name}-t{out['threads']}.json", out)
     atomic_write(f"{args.out}/bench/summary.md", _summary_all(f"{args.out}/bench"))
     if args.json:
@@ -253,6 +277,14 @@ def _summary(out: dict) -> str:
             lines.append(f"| {k} | " + " | ".join(
                 f"{v[kind]['ratio']:.3f} [{v[kind]['min']:.3f} – {v[kind]['max']:.3f}]" if kind in v else "–"
                 for kind in ("random", "camera")) + " |")
+    fit = out.get("bvh_sah_fit")
+    if fit:
+        lines += ["", f"bvh4-sah-fit: the BVH4 built with the SAH traversal weight C_trav/C_isect = {fit['trav_cost']:.3f} "
+                      f"(pbrt-v2: 0.125), fitted in this run on {', '.join(fit['scenes'])}: the binary BVH's time per ray "
+                      "against its node visits and triangle tests, per ray kind (c_node / c_test: "
+                      + ", ".join(f"{k} {fit[f'{k}_ratio']:.2f} (MAPE {fit[f'{k}_mape']:.1f} %)"
+                                  for k in ("random", "camera") if f"{k}_ratio" in fit)
+                      + f"), geometric mean; {fit['seconds']:.0f} s."]
     for k, v in out["unavailable"].items():
         lines.append(f"\nUnavailable: {k}: {v}")
     return "\n".join(lines) + "\n"
