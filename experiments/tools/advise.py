@@ -3,8 +3,10 @@
     gridcost advise --mesh my.obj --rays 1e7 [--kind random|camera|path] [--check] [--json]
 
 For each candidate — the uniform grid at Ize's M = 8N, the two-level grid at M1 = (8N)^0.6, M2 = 8 N2,
-the kd-tree and the BVH (and coherent grid packets for camera rays) — it predicts the total time for
-R rays, build plus trace, with an interval, and picks the fastest:
+the kd-tree, the BVH, the 4-wide BVH built with the SAH weight fitted on this host
+(:class:`costmodel.kdcost.BvhSahFit`; probed whenever the BVH is) and, for camera rays, coherent grid
+packets — it predicts the total time for R rays, build plus trace, with an interval, and picks the
+fastest:
 
 * **Grids** are probed, as Hapala 2011's decision algorithm does: built (wall clock, the median of
   3 builds when cheap) and samples of 20,000 rays traced (median of 5 interleaved rounds of every
@@ -57,6 +59,9 @@ PROBE_BUILD_MAX_S = 2.0
 #: loaded machine hands out, so one preemption does not make a sample (camera rays: 20,000 rays
 #: can take 4 ms)
 MIN_SAMPLE_S = 0.05
+#: meshes the BVH4 candidate's SAH weight is fitted on (costmodel.kdcost.fit_bvh_trav_cost); --quick:
+#: two of the quick calibration scenes, fewer rays
+BVH_SAH_QUICK = {"scenes": ("bunny-948", "teapot"), "n_rays": 10_000, "repeats": 3}
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
 #: disjoint probe sets of PROBE_RAYS each, traced in turn (:func:`probe_pool`)
@@ -74,7 +79,8 @@ def add_arguments(p) -> None:
 
 
 def calibration(ctx, log) -> dict:
-    """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}."""
+    """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}, and
+    ``bvh4_trav_cost``: the 4-wide BVH's SAH weight fitted on this host in this call (4 s)."""
     from costmodel.select import GridcostEstimator, loo_errors, records
     from experiments.hapala.table1 import measure_all
     names, cfg = (QUICK_CALIBRATION, QUICK_CAL_CFG) if ctx.quick else (CALIBRATION, CAL_CFG)
@@ -83,7 +89,12 @@ def calibration(ctx, log) -> dict:
     if time.time() - t0 > 5:
         log(f"advise: calibrated this host on {len(names)} small scenes in {time.time() - t0:.0f} s "
             f"(stored: later calls reuse it)")
-    out = {}
+    from costmodel.kdcost import fit_bvh_trav_cost
+    t0 = time.time()
+    sah = fit_bvh_trav_cost(**(BVH_SAH_QUICK if ctx.quick else {}))
+    out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah": sah.summary()}
+    log(f"advise: the BVH4's SAH weight fitted on {', '.join(out['bvh4_sah']['scenes'])}: "
+        f"C_trav/C_isect {sah.trav_cost_:.2f} ({time.time() - t0:.0f} s)")
     for kind in ("random", "path"):
         out[kind] = {}
         for hier in cfg["hiers"]:
@@ -147,6 +158,9 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
         T_BH, t_RH = est.predict(feats["N"], feats)
         if T_BH <= PROBE_BUILD_MAX_S:
             probed.append((hier, {}, f"probed (its estimated build, {T_BH * 1e3:.0f} ms, is cheap)"))
+            if hier == "bvh" and "bvh4_trav_cost" in cal:  # the BVH4 builds from the same binary BVH
+                w = cal["bvh4_trav_cost"]
+                probed.append(("bvh4", {"trav_cost": w}, f"probed (4-wide BVH, SAH weight {w:.2f} fitted on this host)"))
             continue
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),

@@ -156,7 +156,8 @@ def _summary(df: pd.DataFrame, cdf: pd.DataFrame, meshes: dict, n_rays: int, rep
     lines = ["# advise-check: advise on meshes outside its calibration", "",
              f"Each row: one mesh, one ray kind, one budget R. **pick** = advise's fastest predicted total; "
              f"**measured best** = the fastest *measured* total over every candidate (grid M = 8N, two-level grid, "
-             f"kd-tree, BVH, and coherent grid packets for camera rays). Measured total = build (median of "
+             f"kd-tree, BVH, the BVH4 with the SAH weight fitted on this host, and coherent grid packets for camera "
+             f"rays). Measured total = build (median of "
              f"{repeats} builds after a warm-up, wall clock) + R x per-ray time (median of {repeats} interleaved "
              f"rounds of all candidates on the same {n_rays:,} fresh rays, thread CPU time, one thread); R above "
              f"{n_rays:,} is scaled from them. **loss** = pick's measured total over the best's − 1 (goal ≤ 10 %); "
