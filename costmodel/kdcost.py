@@ -152,9 +152,8 @@ class BvhSahFit:
                                    ("mape", self.mape_))}}
 
 
-def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, **measure) -> BvhSahFit:
-    """Measure the binary BVH at :data:`BVH_SETTINGS` on ``scenes`` (or take ``points`` from
+def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, settings=BVH_SETTINGS, **measure) -> BvhSahFit:
+    """Measure the binary BVH at ``settings`` on ``scenes`` (or take ``points`` from
     :func:`measure_kd_points` with ``structure="bvh"``) and fit :class:`BvhSahFit`."""
-    pts = points if points is not None else measure_kd_points(
-        scenes, settings=measure.pop("settings", BVH_SETTINGS), structure="bvh", **measure)
+    pts = points if points is not None else measure_kd_points(scenes, settings=settings, structure="bvh", **measure)
     return BvhSahFit().fit(pts)

@@ -93,8 +93,8 @@ def calibration(ctx, log) -> dict:
     from costmodel.kdcost import fit_bvh_trav_cost
     t0 = time.time()
     sah = fit_bvh_trav_cost(**(BVH_SAH_QUICK if ctx.quick else {}))
-    out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah": sah.summary()}
-    log(f"advise: the BVH4's SAH weight fitted on {', '.join(out['bvh4_sah']['scenes'])}: "
+    out = {"bvh4_trav_cost": sah.trav_cost_}
+    log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: "
         f"C_trav/C_isect {sah.trav_cost_:.2f} ({time.time() - t0:.0f} s)")
     for kind in ("random", "path"):
         out[kind] = {}
