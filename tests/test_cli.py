@@ -160,6 +160,16 @@ def test_advise_json_predicts_and_checks(run_cli, tmp_path):
     checked = [c for c in out["candidates"] if "measured_s" in c]
     assert len(checked) == 3 and all(c["measured_s"] > 0 for c in checked)
     assert (tmp_path / "advise" / "summary.md").exists()
+    # the BVH4's SAH weight: its points (3 meshes x 5 builds x 2 ray kinds) stored with their
+    # provenance, and a second call fits it from them instead of measuring again
+    sah = [r for r in (json.loads(f.read_text()) for f in (tmp_path / "points").glob("*.json"))
+           if isinstance(r["value"], list) and r["value"] and r["value"][0].get("nodes") is not None]
+    assert len(sah) == 1 and len(sah[0]["value"]) == 30 and sah[0]["provenance"]["commit"]
+    assert {p_["scene"] for p_ in sah[0]["value"]} == {"bunny-16k", "dragon-11k", "teapot"}
+    again = run_cli("advise", "--quick", "--scene", "dragon-11k", "--rays", "1e6", "--out", str(tmp_path), timeout=600)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert f"C_trav/C_isect {out['candidates'][names.index('bvh4')]['params']['trav_cost']:.2f} (stored points" \
+        in again.stdout + again.stderr
 
 
 def test_trimesh_reference_rays_fit_the_memory_budget(monkeypatch):

@@ -63,6 +63,8 @@ MIN_SAMPLE_S = 0.05
 #: three meshes with fewer rays (two tiny scenes fitted well too, but three meshes leave more margin
 #: against a term coming out free on a loaded machine)
 BVH_SAH_QUICK = {"n_rays": 10_000, "repeats": 3}
+#: the files beside tracer/ that shape those points (their measurement key)
+BVH_SAH_CODE = ("costmodel/kdcost.py",)
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
 #: disjoint probe sets of PROBE_RAYS each, traced in turn (:func:`probe_pool`)
@@ -81,7 +83,8 @@ def add_arguments(p) -> None:
 
 def calibration(ctx, log) -> dict:
     """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}, and
-    ``bvh4_trav_cost``: the 4-wide BVH's SAH weight fitted on this host in this call (4 s)."""
+    ``bvh4_trav_cost``: the 4-wide BVH's SAH weight fitted on this host (its points measured by the
+    first call, 4 s, and stored: :func:`bvh_sah_points`)."""
     from costmodel.select import GridcostEstimator, loo_errors, records
     from experiments.hapala.table1 import measure_all
     names, cfg = (QUICK_CALIBRATION, QUICK_CAL_CFG) if ctx.quick else (CALIBRATION, CAL_CFG)
@@ -90,12 +93,15 @@ def calibration(ctx, log) -> dict:
     if time.time() - t0 > 5:
         log(f"advise: calibrated this host on {len(names)} small scenes in {time.time() - t0:.0f} s "
             f"(stored: later calls reuse it)")
-    from costmodel.kdcost import fit_bvh_trav_cost
+    from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS, fit_bvh_trav_cost
     t0 = time.time()
-    sah = fit_bvh_trav_cost(**(BVH_SAH_QUICK if ctx.quick else {}))
+    key = {"target": "advise-bvh-sah", "scenes": list(BVH_CALIBRATION), "settings": list(BVH_SETTINGS),
+           "quick": bool(ctx.quick), **(BVH_SAH_QUICK if ctx.quick else {})}
+    pts, cached = ctx.store(code=BVH_SAH_CODE).measure(key, bvh_sah_points, bool(ctx.quick))
+    sah = fit_bvh_trav_cost(points=pts)
     out = {"bvh4_trav_cost": sah.trav_cost_}
-    log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: "
-        f"C_trav/C_isect {sah.trav_cost_:.2f} ({time.time() - t0:.0f} s)")
+    log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: C_trav/C_isect "
+        f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})")
     for kind in ("random", "path"):
         out[kind] = {}
         for hier in cfg["hiers"]:
@@ -108,6 +114,15 @@ def calibration(ctx, log) -> dict:
             out[kind][hier] = (est, {"build": (float(rel_b.quantile(0.1)), float(rel_b.quantile(0.9))),
                                      "ray": (float(rel_r.quantile(0.1)), float(rel_r.quantile(0.9)))})
     return out
+
+
+def bvh_sah_points(quick: bool) -> list[dict]:
+    """The binary BVH's points of :func:`costmodel.kdcost.fit_bvh_trav_cost` on its calibration
+    meshes (fewer rays with ``quick``): measured once per host and code, stored like every point
+    (:func:`calibration`)."""
+    from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS, measure_kd_points
+    return measure_kd_points(BVH_CALIBRATION, settings=BVH_SETTINGS, structure="bvh",
+                             **(BVH_SAH_QUICK if quick else {}))
 
 
 def probe_pool(scene, kind: str, seed: int) -> list:
