@@ -85,3 +85,24 @@ def test_lowres_goal_tally_counts_scenes_per_goal():
     assert "512²: CGT / Embree >= 1.0 on 2 of 3 scenes (a, c)" in line
     assert "1024²: CGT / Embree >= 1.3 on 2 of 3 scenes (b, c)" in line
     assert goal_tally(df[df.side == 64]) == ""
+
+
+def test_needs_of_single_rays_are_their_own_walks(bunny):
+    """With one ray per 'packet' the needs kernel is the ray's own walk: its distinct cells are the
+    grid's steps and the references they hold are the unmailboxed grid's tests, ray for ray; packets
+    of 64 share cells, so their distinct cells and references fall below the sum of their rays'."""
+    from experiments.wald.needs import needs_row, packet_needs
+    from tracer.grid import UniformGrid
+    rays = wald_camera(bunny, 48, 8)
+    g = UniformGrid(res=(12, 11, 10)).build(bunny)
+    hits, cnt = g.intersect(rays.origins, rays.directions)
+    nx, ny, nz = g.res_
+    per_ray = packet_needs(rays.origins, rays.directions, hits.t.astype(np.float64), 1, g.gp_, nx, ny, nz,
+                           g.cell_start_, g.tri_ids_, bunny.n)
+    np.testing.assert_array_equal(per_ray[:, 0], cnt["steps"])
+    np.testing.assert_array_equal(per_ray[:, 1], cnt["steps"])  # a DDA walk never enters a cell twice
+    np.testing.assert_array_equal(per_ray[:, 2], cnt["tests"])
+    assert (per_ray[:, 3] <= per_ray[:, 2]).all() and per_ray[:, 3].sum() > 0
+    own = needs_row(g, rays, hits.t, 64, bunny.n)
+    assert own["own_cells"] == pytest.approx(cnt["steps"].mean())
+    assert 0 < own["need_cells"] < 0.5 * own["own_cells"] and 0 < own["need_tris"] < own["need_refs"] < cnt["tests"].mean()
