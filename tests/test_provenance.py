@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from experiments.core.context import RunContext
-from experiments.core.store import PointStore
+from experiments.core.store import PointStore, read_csv
 from tracer import build, load_scene
 from tracer.errors import GridcostError
 
@@ -120,9 +120,20 @@ def test_rows_carry_commit_host_clock(tmp_path):
     ctx.start_target()
     ctx.store().put({"p": 4}, {"v": 1})
     ctx.write_csv(tmp_path / "x.csv", pd.DataFrame([{"a": 1}]))
-    df = pd.read_csv(tmp_path / "x.csv")
+    df = read_csv(tmp_path / "x.csv")
     now = ctx.ledger.now()
     assert df.commit[0] == now["commit"] and df.host[0] == now["host"] and df.clock[0] == now["clock"]
+
+
+@pytest.mark.parametrize("commit", ["7704900", "1234e56", "0a1b2c3"])
+def test_results_csv_keeps_commits_text(tmp_path, commit):
+    """An abbreviated hash of digits (or digits and one 'e') is text, not a number: pandas alone reads
+    "7704900" as an int and "1234e56" as 1.234e+59."""
+    import pandas as pd
+    pd.DataFrame([{"a": 1, "commit": commit, "host": "0042", "clock": "thread CPU time",
+                   "source_commit": commit}]).to_csv(tmp_path / "x.csv", index=False)
+    df = read_csv(tmp_path / "x.csv")
+    assert df.commit[0] == commit and df.source_commit[0] == commit and df.host[0] == "0042" and df.a[0] == 1
 
 
 # ---------------------------------------------------------------- clocks

@@ -75,6 +75,15 @@ def versions() -> dict:
 # ---------------------------------------------------------------- provenance of the numbers a target writes
 #: the provenance columns every CSV row carries
 PROVENANCE_COLUMNS = ("commit", "host", "clock")
+#: columns that name a commit or host: always text (an abbreviated hash may be all digits, or read
+#: as a number in scientific notation: "1234e56")
+TEXT_COLUMNS = PROVENANCE_COLUMNS + ("source_commit", "worker")
+
+
+def read_csv(path) -> "pd.DataFrame":
+    """A results CSV, its provenance columns (:data:`TEXT_COLUMNS`) read as text."""
+    import pandas as pd
+    return pd.read_csv(path, dtype={c: str for c in TEXT_COLUMNS})
 
 
 class Ledger:

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import GridCostFit
-from experiments.core.store import atomic_write
+from experiments.core.store import atomic_write, read_csv
 
 
 def add_arguments(p) -> None:
@@ -25,7 +25,7 @@ def _load(ctx, args, target):
         mod = importlib.import_module(f"experiments.ize.{target}")
         sub = argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None, "seed": 0})
         mod.run(ctx, sub, log=lambda *a: None)
-    return pd.read_csv(path)
+    return read_csv(path)
 
 
 def main(ctx, args) -> int:

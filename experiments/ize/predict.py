@@ -43,7 +43,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.memory import EntryRefsCostFit, MemoryCostFit, PaperCountFit, aic
-from experiments.core.store import atomic_write
+from experiments.core.store import atomic_write, read_csv
 from experiments.ize import memmodel
 from tracer.errors import GridcostError
 
@@ -72,7 +72,7 @@ def load_sweeps(ctx, args) -> pd.DataFrame:
     frames = []
     for src, rel in SOURCES:
         if (out / rel).exists():
-            d = pd.read_csv(out / rel)
+            d = read_csv(out / rel)
             if "occupied" not in d:
                 raise GridcostError(f"{out / rel} has no 'occupied' counter (made by an older gridcost): "
                                     f"re-run `gridcost {src}`")
@@ -232,7 +232,7 @@ def selector_points(out) -> pd.DataFrame:
     path = Path(out) / "fig1h" / "speed_accuracy.csv"
     if not path.exists():
         return pd.DataFrame()
-    s = pd.read_csv(path)
+    s = read_csv(path)
     s = s[s.axis == "calibration scenes"]
     return pd.DataFrame({"model": "selector: " + s.estimator + " estimator", "n_train": s.C, "points": s.sample_rays,
                          "calibration_s": s.cost_s, "wrong_picks_pct": 100 * (1 - s.correct),

@@ -28,7 +28,7 @@ import pandas as pd
 
 from costmodel.fit import CounterCostFit
 from experiments.ize import memmodel
-from experiments.core.store import atomic_write
+from experiments.core.store import atomic_write, read_csv
 from tracer.constants import IZE_M_FACTOR, PBRT_GRID_MAX_VOXELS, WALD_LAMBDA
 
 
@@ -87,7 +87,7 @@ def _points(ctx, args) -> pd.DataFrame:
         from experiments.ize import exponents
         exponents.main(ctx, argparse.Namespace(**{**vars(args), "families": None, "rays": None, "repeats": None,
                                                   "seed": 0, "target": "exponents"}))
-    return pd.read_csv(path)
+    return read_csv(path)
 
 
 def main(ctx, args) -> int:

@@ -17,6 +17,7 @@ from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_
 from experiments.ize import memmodel
 from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
+from experiments.core.store import read_csv
 from experiments.core.sweep import (penalty_range, FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
 from experiments.core.target import begin, kind_rays, run_quiet
@@ -272,7 +273,7 @@ def main(ctx, args) -> int:
     if args.json:
         import json
         import sys
-        tab = pd.read_csv(Path(args.out) / "table2" / "table2_summary.csv")
+        tab = read_csv(Path(args.out) / "table2" / "table2_summary.csv")
         json.dump({"rows": tab.to_dict(orient="records")}, sys.stdout, default=float)
         print()
     return 0
