@@ -116,18 +116,16 @@ def goal_tally(df: pd.DataFrame) -> str:
 
 
 def _needs_reading(df) -> str:
-    """What a packet does that its rays' own walks would not, at the goal sides (issue 15)."""
+    """What a packet does that its rays' own walks would not, at every side (issue 15): the range over
+    the scenes of the unneeded references' share and of the packet's tests over its rays' own."""
     parts = []
-    for side in sorted(GOALS):
-        d = df[df.side == side]
-        if len(d):
-            parts.append(f"at {side}² a packet considers {100 * d.refs_unneeded.min():.0f}-{100 * d.refs_unneeded.max():.0f} % "
-                         f"of its references in cells none of its rays needs, and makes "
-                         f"{(d.tests / d.single_tests).min():.1f}-{(d.tests / d.single_tests).max():.1f}x the ray-triangle "
-                         "tests its rays' own walks make")
-    return ("- What the packets do that their rays would not (own walks): " + "; ".join(parts)
-            + ". The unneeded references stay at about the same share as the side falls; the extra tests grow "
-            "as the frustum widens.") if parts else ""
+    for side, d in df.groupby("side"):
+        f = d.tests / d.single_tests
+        parts.append(f"{int(side)}²: {100 * d.refs_unneeded.min():.0f}-{100 * d.refs_unneeded.max():.0f} % of the "
+                     f"references, {f.min():.1f}-{f.max():.1f}x the tests")
+    return ("- What the packets do that their rays would not (own walks; over the scenes, references a packet considers "
+            "in cells none of its rays needs, and its ray-triangle tests over its rays' own): " + "; ".join(parts)
+            + ".") if parts else ""
 
 
 def _summary(df, fit, rounds) -> str:
