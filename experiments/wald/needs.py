@@ -20,9 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracer._jit import jit
-from tracer.geometry import dda_cursor, dda_setup, dda_step, ray_box
-
-INF = np.inf
+from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box
 
 
 @jit
@@ -69,8 +67,7 @@ def needs_row(grid, rays, hits_t, packet_rays: int, n_tris: int) -> dict:
     repeats), and per packet the distinct cells (``need_cells``), the references they hold
     (``need_refs``) and the distinct triangles (``need_tris``)."""
     nx, ny, nz = (int(r) for r in grid.res_)
-    t = np.where(np.isfinite(hits_t), hits_t, np.inf).astype(np.float64)
-    pk = packet_needs(rays.origins, rays.directions, t, int(packet_rays), grid.gp_, nx, ny, nz,
+    pk = packet_needs(rays.origins, rays.directions, np.asarray(hits_t, np.float64), int(packet_rays), grid.gp_, nx, ny, nz,
                       grid.cell_start_, grid.tri_ids_, int(n_tris))
     n = rays.n
     return {k: pk[:, j].sum() / n for j, k in enumerate(("own_cells", "need_cells", "need_refs", "need_tris"))}
