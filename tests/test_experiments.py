@@ -229,3 +229,23 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     assert one["anchored_ns_per_ray"] == pytest.approx(one["anchored_seconds"] / 3000 * 1e9)
     more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
     assert more[0]["anchored_seconds"] == pytest.approx(more[0]["ratio_to_ref"] * anchor)
+
+
+def test_point_hits_is_the_fraction_of_all_rays():
+    """A sweep row's ``hits`` counts every ray: rays whose first 2,000 all miss (the sample the
+    column once took) and whose rest all hit read 0.5, checked against the oracle."""
+    from experiments.core.point import measure
+    from tracer.oracle import oracle_intersect
+    from tracer.rays import Rays
+    scene = load_scene("bunny-948")
+    lo, hi = scene.bounds.astype(float)
+    c = (np.asarray(lo, float) + np.asarray(hi, float)) / 2
+    n = 3000
+    o = np.tile(c + [0.0, 0.0, 10.0 * float(np.max(np.asarray(hi) - lo))], (n, 1))
+    d = np.tile([0.0, 0.0, -1.0], (n, 1))
+    o[:n // 2, 0] += 1e3  # the first half passes far beside the mesh
+    r = Rays(o.astype(np.float32), d.astype(np.float32), "synthetic", 0)
+    truth = float((oracle_intersect(scene, r.origins, r.directions)[0].tri_id >= 0).mean())
+    (row,) = measure(scene, "grid", {"cells": 500.0}, {"synthetic": r}, repeats=1, min_sample=0.0)
+    assert truth == 0.5
+    assert row["hits"] == truth
