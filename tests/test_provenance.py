@@ -257,3 +257,19 @@ def test_bench_threads_ratio_is_labelled_per_thread(tmp_path):
     assert out["ratios"][key]["random"] == pytest.approx(s["grid"]["random_mrays"] / 2 / s["embree"]["random_mrays"])
     assert "paired" in out and "grid/embree" not in out["paired"]  # paired ratios only at one thread
     assert np.isfinite(out["ratios"][key]["camera"])
+
+
+def test_results_index_names_who_measured_each_folder(tmp_path):
+    """results/README.md's last column: each folder's commit, CPU and date from its meta.json."""
+    from experiments.core.store import write_index
+    out, figs = tmp_path / "results", tmp_path / "paper_figs"
+    figs.mkdir()
+    for name, commit, cpu in (("table2", "d986c17", "AMD EPYC"), ("bench", "7d0395f", "Intel(R) Xeon(R) Processor")):
+        (out / name).mkdir(parents=True)
+        (out / name / "meta.json").write_text(json.dumps({"git_commit": commit, "host": {"cpu": cpu},
+                                                          "finished": "2026-12-02T10:00:00+0000"}))
+    (out / "derive").mkdir()  # no meta.json
+    rows = {ln.split("|")[1].strip(): ln for ln in write_index(out, figs).read_text().splitlines() if ln.startswith("| ")}
+    assert rows["table2"].rstrip().endswith("| `d986c17`, AMD EPYC, 2026-12-02 |")
+    assert rows["bench"].rstrip().endswith("| `7d0395f`, Intel(R) Xeon(R) Processor, 2026-12-02 |")
+    assert rows["derive"].rstrip().endswith("| – |")

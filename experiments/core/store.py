@@ -234,18 +234,30 @@ class PointStore:
         return self.put(params, value, provenance=prov), False
 
 
+def _measured_by(meta_path: Path) -> str:
+    """"commit, CPU, date" of a target's meta.json (– when the folder has none)."""
+    if not meta_path.is_file():
+        return "–"
+    meta = json.loads(meta_path.read_text())
+    host = meta.get("host") or {}
+    when = str(meta.get("finished") or "")[:10]
+    return ", ".join(v for v in (f"`{meta.get('git_commit', '?')}`", str(host.get("cpu") or "?"), when) if v)
+
+
 def write_index(out_dir, fig_dir) -> Path:
     """<out>/README.md: a link to every target's summary, data and figure present on disk."""
     out_dir, figs = Path(out_dir), Path(fig_dir)
     lines = ["# Results", "", "Output of the last run of each target (`python -m experiments.run <target>`). "
              "Each folder holds tidy CSV (one row per measurement), `summary.md` (ours beside the paper) and "
-             "`meta.json` (commit, versions, CPU, threads, seeds, wall time).", "",
-             "| target | summary | data | figure |", "|---|---|---|---|"]
+             "`meta.json` (commit, versions, CPU, threads, seeds, wall time); the last column names the commit "
+             "and CPU that measured it (folders of one results/ may come from different runs and hosts).", "",
+             "| target | summary | data | figure | measured by |", "|---|---|---|---|---|"]
     for d in sorted(p for p in out_dir.iterdir() if p.is_dir() and p.name != "points"):
         summ = d / "summary.md"
         csvs = sorted(d.glob("*.csv")) + sorted(d.glob("*.json"))
         fig = sorted(f for f in figs.glob(f"{d.name}*.p[nd][gf]") if f.stem == d.name or f.stem.startswith(d.name + "_"))
         lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
                      + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs) or "–") + " | "
-                     + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " |")
+                     + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " | "
+                     + _measured_by(d / "meta.json") + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")
