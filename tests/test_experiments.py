@@ -43,6 +43,9 @@ def test_table2_quick_writes_everything(quick_out):
     assert (df.anchored_seconds > 0).all() and (df.seconds_raw > 0).all() and (df.steps > 0).all()
     meta = json.loads((d / "meta.json").read_text())
     assert meta["git_commit"] and meta["host"]["cpu"] is not None and meta["rays_per_kind"] == 3000
+    for when in ("start", "end"):  # the host's timing noise around the run (experiments.core.noise)
+        assert meta["timing_noise"][when]["memory_cv"] >= 0 and meta["timing_noise"][when]["samples"] == 5
+    assert "timing CV" in (quick_out / "README.md").read_text()
     text = (d / "summary.md").read_text()
     assert "29,172" in text  # the paper's empirical M for bunny 948 beside ours
     assert (quick_out / "README.md").exists()

@@ -273,3 +273,21 @@ def test_results_index_names_who_measured_each_folder(tmp_path):
     assert rows["table2"].rstrip().endswith("| `d986c17`, AMD EPYC, 2026-12-02 |")
     assert rows["bench"].rstrip().endswith("| `7d0395f`, Intel(R) Xeon(R) Processor, 2026-12-02 |")
     assert rows["derive"].rstrip().endswith("| – |")
+
+
+def test_timing_noise_is_measured_without_counting_as_a_timing():
+    """The noise meter's reading: finite, non-negative CVs of both kernels, on the run's clock; it
+    must not move tracer.timing's count of timings (which tells a file measured now from one drawn
+    from stored points)."""
+    from experiments.core.noise import timing_noise, worst_cv
+    from tracer.timing import timing_calls
+    before = timing_calls()
+    tn = timing_noise(samples=4, min_sample=0.002)
+    assert timing_calls() == before
+    assert tn["clock"] in ("thread CPU time", "wall time") and tn["samples"] == 4
+    for k in ("compute_cv", "compute_spread", "memory_cv", "memory_spread"):
+        assert np.isfinite(tn[k]) and tn[k] >= 0, (k, tn)
+    assert worst_cv({"timing_noise": {"start": None, "end": tn}}) == max(tn["compute_cv"], tn["memory_cv"])
+    assert worst_cv({}) is None
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        timing_noise(samples=1)

@@ -32,6 +32,8 @@ class RunContext:
     ref_cache: dict = field(default_factory=dict)
     #: scenes already loaded in this process (local execution reuses them)
     scenes: dict = field(default_factory=dict)
+    #: this host's timing noise when the current target started (:mod:`experiments.core.noise`)
+    noise_start: dict | None = None
 
     def __post_init__(self):
         self.out = Path(self.out)
@@ -55,8 +57,13 @@ class RunContext:
 
     # ------------------------------------------------------------ per target
     def start_target(self) -> None:
-        """A fresh ledger before each target."""
+        """A fresh ledger and a reading of the host's timing noise before each target."""
         self.ledger.reset()
+        self.noise_start = self._noise()
+
+    def _noise(self) -> dict:
+        from experiments.core.noise import timing_noise
+        return timing_noise(5, 0.005) if self.quick else timing_noise()
 
     def store(self, code: tuple = (), out=None) -> PointStore:
         """The point store of this run (``out``/points), keyed by ``code`` beside tracer/."""
@@ -96,8 +103,9 @@ class RunContext:
         return atomic_write(path, df.to_csv(index=False))
 
     def write_meta(self, out_dir, target: str, started: float, **extra) -> Path:
-        """meta.json: the commit that drew the file, versions, host, wall time, and ``measured_by``:
-        the distinct commits, hosts and clocks behind its numbers."""
+        """meta.json: the commit that drew the file, versions, host, wall time, ``measured_by``: the
+        distinct commits, hosts and clocks behind its numbers, and ``timing_noise``: the host's
+        timing noise when the target started and now (:mod:`experiments.core.noise`)."""
         from tracer.timing import host_info
         src = self.ledger.sources()
         meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
@@ -108,7 +116,8 @@ class RunContext:
                                 "clocks": sorted({str(o["clock"]) for o in src}), "sources": src,
                                 "points_measured_now": self.ledger.measured, "points_reused": self.ledger.reused,
                                 "stale_points_reused": self.ledger.stale},
-                "executor": getattr(self.executor, "name", "local"), **extra}
+                "executor": getattr(self.executor, "name", "local"),
+                "timing_noise": {"start": self.noise_start, "end": self._noise()}, **extra}
         return write_json(Path(out_dir) / "meta.json", meta)
 
     def finish_figure(self, fig, name: str) -> list[Path]:

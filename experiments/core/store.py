@@ -240,8 +240,11 @@ def _measured_by(meta_path: Path) -> str:
         return "–"
     meta = json.loads(meta_path.read_text())
     host = meta.get("host") or {}
+    from experiments.core.noise import worst_cv
     when = str(meta.get("finished") or "")[:10]
-    return ", ".join(v for v in (f"`{meta.get('git_commit', '?')}`", str(host.get("cpu") or "?"), when) if v)
+    cv = worst_cv(meta)
+    noise = f"timing CV {100 * cv:.1f} %" if cv is not None else ""
+    return ", ".join(v for v in (f"`{meta.get('git_commit', '?')}`", str(host.get("cpu") or "?"), when, noise) if v)
 
 
 def write_index(out_dir, fig_dir) -> Path:
@@ -250,7 +253,9 @@ def write_index(out_dir, fig_dir) -> Path:
     lines = ["# Results", "", "Output of the last run of each target (`python -m experiments.run <target>`). "
              "Each folder holds tidy CSV (one row per measurement), `summary.md` (ours beside the paper) and "
              "`meta.json` (commit, versions, CPU, threads, seeds, wall time); the last column names the commit "
-             "and CPU that measured it (folders of one results/ may come from different runs and hosts).", "",
+             "and CPU that measured it (folders of one results/ may come from different runs and hosts) and, "
+             "where recorded, the host's timing noise during the run (the larger coefficient of variation of "
+             "two fixed kernels timed back to back at its start and end: `experiments/core/noise.py`).", "",
              "| target | summary | data | figure | measured by |", "|---|---|---|---|---|"]
     for d in sorted(p for p in out_dir.iterdir() if p.is_dir() and p.name != "points"):
         summ = d / "summary.md"
