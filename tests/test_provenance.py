@@ -260,7 +260,8 @@ def test_bench_threads_ratio_is_labelled_per_thread(tmp_path):
 
 
 def test_results_index_names_who_measured_each_folder(tmp_path):
-    """results/README.md's last column: each folder's commit, CPU and date from its meta.json."""
+    """results/README.md's last column: each folder's commit, CPU and date from its meta.json (or
+    from every JSON naming a commit, where a target writes one per run)."""
     from experiments.core.store import write_index
     out, figs = tmp_path / "results", tmp_path / "paper_figs"
     figs.mkdir()
@@ -269,10 +270,15 @@ def test_results_index_names_who_measured_each_folder(tmp_path):
         (out / name / "meta.json").write_text(json.dumps({"git_commit": commit, "host": {"cpu": cpu},
                                                           "finished": "2026-12-02T10:00:00+0000"}))
     (out / "derive").mkdir()  # no meta.json
+    (out / "verify").mkdir()  # one JSON per run, no meta.json
+    for name, commit in (("grid", "acd51cd"), ("bvh", "cb824b8")):
+        (out / "verify" / f"{name}.json").write_text(json.dumps({"git_commit": commit, "host": {"cpu": "Intel"},
+                                                                 "finished": f"2026-12-0{1 + len(name)}T00:00"}))
     rows = {ln.split("|")[1].strip(): ln for ln in write_index(out, figs).read_text().splitlines() if ln.startswith("| ")}
     assert rows["table2"].rstrip().endswith("| `d986c17`, AMD EPYC, 2026-12-02 |")
     assert rows["bench"].rstrip().endswith("| `7d0395f`, Intel(R) Xeon(R) Processor, 2026-12-02 |")
     assert rows["derive"].rstrip().endswith("| – |")
+    assert rows["verify"].rstrip().endswith("| `acd51cd`, `cb824b8`, Intel, 2026-12-05 |")
 
 
 def test_timing_noise_is_measured_without_counting_as_a_timing():

@@ -234,17 +234,21 @@ class PointStore:
         return self.put(params, value, provenance=prov), False
 
 
-def _measured_by(meta_path: Path) -> str:
-    """"commit, CPU, date" of a target's meta.json (– when the folder has none)."""
-    if not meta_path.is_file():
-        return "–"
-    meta = json.loads(meta_path.read_text())
-    host = meta.get("host") or {}
+def _measured_by(folder: Path) -> str:
+    """"commit(s), CPU(s), date[, timing CV]" of a target's folder: from its meta.json, or, for targets
+    that write one JSON per run instead (bench, verify), from every JSON of the folder naming a commit;
+    – when none does."""
     from experiments.core.noise import worst_cv
-    when = str(meta.get("finished") or "")[:10]
-    cv = worst_cv(meta)
-    noise = f"timing CV {100 * cv:.1f} %" if cv is not None else ""
-    return ", ".join(v for v in (f"`{meta.get('git_commit', '?')}`", str(host.get("cpu") or "?"), when, noise) if v)
+    paths = [folder / "meta.json"] if (folder / "meta.json").is_file() else sorted(folder.glob("*.json"))
+    metas = [m for m in (json.loads(p.read_text()) for p in paths) if isinstance(m, dict) and m.get("git_commit")]
+    if not metas:
+        return "–"
+    commits = sorted({f"`{m['git_commit']}`" for m in metas})
+    cpus = sorted({str((m.get("host") or {}).get("cpu") or "?") for m in metas})
+    when = max(str(m.get("finished") or "")[:10] for m in metas)
+    cvs = [c for c in map(worst_cv, metas) if c is not None]
+    noise = f"timing CV {100 * max(cvs):.1f} %" if cvs else ""
+    return ", ".join(v for v in (*commits, *cpus, when, noise) if v)
 
 
 def write_index(out_dir, fig_dir) -> Path:
@@ -264,5 +268,5 @@ def write_index(out_dir, fig_dir) -> Path:
         lines.append(f"| {d.name} | {f'[summary.md]({d.name}/summary.md)' if summ.exists() else '–'} | "
                      + (", ".join(f"[{c.name}]({d.name}/{c.name})" for c in csvs) or "–") + " | "
                      + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " | "
-                     + _measured_by(d / "meta.json") + " |")
+                     + _measured_by(d) + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")
