@@ -135,8 +135,16 @@ def test_bvh_sah_fit_recovers_the_weight_per_kind():
 
 
 def test_bvh_sah_fit_refuses_a_free_test():
-    """Times that do not grow with the tests (c_test fitted 0) give a clear error, not a zero weight."""
-    pts = [{"scene": "s", "kind": "random", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": 5e-9 * n}
-           for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
-    with pytest.raises(GridcostError, match="came out free"):
-        BvhSahFit().fit(pts)
+    """Times that do not grow with the tests (c_test fitted 0) give a clear error, not a zero weight;
+    when another ray kind fits, the weight is that kind's, and the kind left out is named."""
+    free = [{"scene": "s", "kind": "camera", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": 5e-9 * n}
+            for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
+    with pytest.raises(GridcostError, match="came out free for every ray kind"):
+        BvhSahFit().fit(free)
+    good = [{"scene": "s", "kind": "random", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": (20 * n + 10 * t) * 1e-9}
+            for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
+    fit = BvhSahFit().fit(good + free)
+    assert fit.trav_cost_ == pytest.approx(2.0, rel=1e-6) and set(fit.ratios_) == {"random"}
+    assert set(fit.free_) == {"camera"} and fit.free_["camera"][1] < 1e-6 * fit.free_["camera"][0]
+    assert "camera-ray fit left out: a test came out free" in fit.note()
+    assert fit.summary()["kinds_left_out"] == ["camera"] and BvhSahFit().fit(good).note() == ""

@@ -101,7 +101,8 @@ def calibration(ctx, log) -> dict:
     sah = fit_bvh_trav_cost(points=pts)
     out = {"bvh4_trav_cost": sah.trav_cost_}
     log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: C_trav/C_isect "
-        f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})")
+        f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})"
+        + (f"; {sah.note()}" if sah.free_ else ""))
     for kind in ("random", "path"):
         out[kind] = {}
         for hier in cfg["hiers"]:

@@ -108,7 +108,8 @@ def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
         fit = fit_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
         out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
         log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
-            f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)")
+            f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)"
+            + (f"; {fit.note()}" if fit.free_ else ""))
     return {**params, "trav_cost": out["bvh_sah_fit"]["trav_cost"]}
 
 
