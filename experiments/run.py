@@ -105,6 +105,7 @@ def _run_target(name: str, ctx, args) -> int:
     rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
     ctx.mark_stand_ins(ctx.out / name / "summary.md")
     ctx.mark_hosts(ctx.out / name / "summary.md")
+    ctx.mark_noise(ctx.out / name)
     if name != "verify" and ctx.out.is_dir():
         write_index(ctx.out, ctx.fig_dir)
     return rc

@@ -46,6 +46,7 @@ def test_table2_quick_writes_everything(quick_out):
     for when in ("start", "end"):  # the host's timing noise around the run (experiments.core.noise)
         assert meta["timing_noise"][when]["memory_cv"] >= 0 and meta["timing_noise"][when]["samples"] == 5
     assert "timing CV" in (quick_out / "README.md").read_text()
+    assert "## Timing noise" in (d / "summary.md").read_text() and "dependent loads" in (d / "summary.md").read_text()
     text = (d / "summary.md").read_text()
     assert "29,172" in text  # the paper's empirical M for bunny 948 beside ours
     assert (quick_out / "README.md").exists()

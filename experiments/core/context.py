@@ -134,6 +134,26 @@ class RunContext:
                          "curves never mix machines, but absolute times of different hosts are not comparable "
                          "(the `host` column of each CSV row says which measured it).\n")
 
+    def mark_noise(self, out_dir) -> None:
+        """Append to a target's summary.md the host's timing noise its meta.json recorded
+        (:mod:`experiments.core.noise`), so a reader weighs its small differences against it."""
+        import json
+        path, meta_path = Path(out_dir) / "summary.md", Path(out_dir) / "meta.json"
+        if not (path.exists() and meta_path.exists()) or "## Timing noise" in path.read_text():
+            return
+        tn = json.loads(meta_path.read_text()).get("timing_noise") or {}
+        parts = [(w, tn[w]) for w in ("start", "end") if isinstance(tn.get(w), dict)]
+        if not parts:
+            return
+        read = "; ".join(f"{w}: dependent loads {100 * v['memory_cv']:.1f} %, arithmetic {100 * v['compute_cv']:.1f} %"
+                         for w, v in parts)
+        atomic_write(path, path.read_text().rstrip("\n") + "\n\n## Timing noise\n\nCoefficient of variation of two "
+                     f"fixed kernels timed back to back on this host ({parts[0][1]['samples']} samples each, "
+                     f"`experiments/core/noise.py`) — {read}. About 1 % is a quiet host. Ray tracing waits on "
+                     "loads: one sample of two equal points differs by about 1.4 times the loads' CV from noise "
+                     "alone, and the medians of n samples by that over the square root of n (paired rounds "
+                     "cancel slow drifts, not this).\n")
+
     def mark_stand_ins(self, summary_path) -> None:
         """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
         from tracer.registry import STAND_INS
