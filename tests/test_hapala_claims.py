@@ -55,3 +55,11 @@ def test_a_stand_in_has_the_papers_sigma():
     assert scene.n == 8 * load_scene("teapot").n
     assert abs(scene.n - paper[1]) / paper[1] < 0.05
     assert sigma == pytest.approx(paper[2], rel=0.05)
+
+
+def test_fig_summary_shares_of_nothing_read_a_dash():
+    """A quick run where no evaluation scene has a finite R_C (seen on an AMD VM: the grid faster
+    per ray in every quick scene) leaves the capped share NaN: the summary prints "–", not "nan%"."""
+    from experiments.hapala.figs import _share
+    assert _share(float("nan")) == "–" and _share(None) == "–"
+    assert _share(0.25) == "25%" and _share(0.5834, 1) == "58.3%"

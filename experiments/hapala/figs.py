@@ -157,6 +157,11 @@ def _apct(v) -> str:
     return "–" if v is None or not np.isfinite(v) else f"{v:.0f} %"
 
 
+def _share(v, digits: int = 0) -> str:
+    """A fraction as a percentage, "–" when it is not a number (e.g. no evaluation scene with a finite R_C)."""
+    return "–" if v is None or not np.isfinite(v) else f"{v:.{digits}%}"
+
+
 def _rc(v) -> str:
     return "∞" if np.isinf(v) else f"{v:,.0f}"
 
@@ -189,11 +194,11 @@ def summary(target, kind, hier, cal, ev, loo, full, forms, sa, ev_other, other, 
             if C in set(df.C):
                 r = at(df, C)
                 lines.append(f"| {name} | {C} | {_pct(r.mean_err)} | {_apct(r.mean_abs_err)} | {_apct(r.median_abs_err)} | "
-                             f"{r.capped_frac:.0%} | {r.correct:.1%} | {r.lost_mean_pct:.1f} % / {r.lost_total_pct:.1f} % |")
+                             f"{_share(r.capped_frac)} | {_share(r.correct, 1)} | {r.lost_mean_pct:.1f} % / {r.lost_total_pct:.1f} % |")
     if floor is not None:
         lines.append(f"| measurement floor: a second calibration run against the first (table1h --retest) | – | – | "
                      f"{_apct(floor.mean_abs_err)} | {_apct(floor.median_abs_err)} | – | same outcome in "
-                     f"{floor.outcome_agree:.0%} of scenes | – |")
+                     f"{_share(floor.outcome_agree)} of scenes | – |")
     avg = {n: df[df.C >= 2] for n, df in (("paper", p), ("ours", o))}
     lines += ["", "Averaged over C = 2 … S − 1: " + "; ".join(
         f"{n}: mean |Err| {_apct(d.mean_abs_err.mean())}, median |Err| {_apct(d.median_abs_err.mean())}, correct picks "
@@ -275,8 +280,8 @@ def summary(target, kind, hier, cal, ev, loo, full, forms, sa, ev_other, other, 
               f"our {hier} pays off are few ({fin} of {S}: {', '.join(cal.scene[np.isfinite(cal.R_C)])}) and mostly unlike the "
               "rest (large empty spaces around small objects), so leaving one out leaves few like it to learn from. "
               "A repeated measurement reproduces R_C only to the floor above, and the sampled t_R^G, T_B^H and t_R^H are "
-              f"predicted to {full.grid_cv_.get(full.grid_form_, np.nan):.0%}, "
-              f"{full.build_cv_.get(full.build_form_, np.nan):.0%} and {full.ray_cv_.get(full.ray_form_, np.nan):.0%} "
+              f"predicted to {_share(full.grid_cv_.get(full.grid_form_))}, "
+              f"{_share(full.build_cv_.get(full.build_form_))} and {_share(full.ray_cv_.get(full.ray_form_))} "
               "(leave-one-out mean relative errors above). " + _lost_note(cal, loo["ours"])]
     return "\n".join(lines) + "\n"
 
