@@ -75,6 +75,7 @@ def test_time_structures_traces_the_next_set_at_each_call(load, monkeypatch):
         advise.time_structures(scene, [("grid", {})], [pool[0], short], repeats=1, build_repeats=1)
 
 
+@pytest.mark.slow  # CI runs advise-check inside test_all_quick_into_a_fresh_folder; this checks its details
 def test_check_scene_measures_every_candidate(load):
     """Cheap hierarchies are probed (not estimated); every candidate has measured parts; each
     budget's row compares the pick with the fastest measured total."""

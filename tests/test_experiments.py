@@ -168,6 +168,7 @@ def test_bad_input_exit_code(tmp_path):
     assert p.stderr.startswith("error:") and "Traceback" not in p.stderr
 
 
+@pytest.mark.slow  # CI runs table3 (its memory split) inside test_all_quick_into_a_fresh_folder; this checks its details
 def test_memprobe_hollow_rays_and_costs():
     """Hollow rays cross only empty cells (the probe asserts it), and the probed costs are real
     positive times with a triangle test dearer than an empty step."""

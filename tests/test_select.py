@@ -205,6 +205,7 @@ def test_teapot_in_stadium_kdtree_wins_on_path_rays_not_on_random(load):
     assert g < k < 20, tests
 
 
+@pytest.mark.slow  # CI runs selector inside test_all_quick_into_a_fresh_folder; this checks its details
 def test_selector_cli_json(run_cli, tmp_path):
     proc = run_cli("selector", "--scene", "bunny-948", "--rays", "1000000", "--json", "--quick", "--out", str(tmp_path))
     assert proc.returncode == 0, proc.stderr

@@ -50,6 +50,7 @@ def run_target(tmp_path, *args):
     return tmp_path
 
 
+@pytest.mark.slow  # CI runs wald-table3 inside test_all_quick_into_a_fresh_folder; this checks its details
 def test_table3_quick(tmp_path):
     """wald-table3 on a small scene and image: real values in its CSV."""
     out = run_target(tmp_path, "wald-table3", "--scenes", "bunny-948", "--side", "64", "--repeats", "3")
