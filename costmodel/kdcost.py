@@ -72,12 +72,13 @@ class KdCostFit:
 
 
 def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTINGS, n_rays: int = 50_000,
-                      repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree") -> list[dict]:
+                      repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree",
+                      min_sample: float | None = None) -> list[dict]:
     """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
     per-ray means of the counters and the median seconds per ray of the non-counting kernel
-    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` as :func:`tracer.timing.time_call`'s,
-    e.g. ``time.thread_time`` on a loaded machine). ``scenes`` are Scene objects or registry names.
-    Run it single-threaded."""
+    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` (None: its
+    default) as :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
+    ``scenes`` are Scene objects or registry names. Run it single-threaded."""
     from tracer.accel import build
     from tracer.rays import make_rays
     from tracer.scene import load_scene
@@ -90,7 +91,8 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
             kd = build(scene, structure, **params)
             for kind, r in rays.items():
                 _, cnt = kd.intersect(r.origins, r.directions, counters=True)
-                tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats, clock=clock)
+                tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats,
+                               clock=clock, **({} if min_sample is None else {"min_sample": min_sample}))
                 m = cnt.mean()
                 out.append({"scene": scene.name, "kind": kind, "params": dict(params), "rays": r.n,
                             "nodes": m["nodes"], "leaves": m["steps"], "tests": m["tests"],
@@ -127,9 +129,15 @@ class BvhSahFit:
     than an incoherent one (random), so the kinds are fitted apart and ``trav_cost_`` = C_trav /
     C_isect is the geometric mean of their c_node / c_test (the SAH needs only the ratio). A kind
     whose fit leaves a node or a test free (noisy timings: seen for camera rays on a busy cloud VM)
-    is left out of the mean and named in ``free_`` and :meth:`note`; when every kind does, the fit
-    raises. Fitted: ``c_node_``, ``c_test_``, ``mape_``, ``ratios_`` (dicts by kind), ``free_``
-    (kind -> (c_node, c_test) of the kinds left out), ``trav_cost_``."""
+    is left out of the mean and named in ``free_`` and :meth:`note`. When every kind does (seen for
+    both kinds of ``advise --quick``'s 10,000-ray points on a noisy cloud VM), the timings cannot
+    separate the two costs at all: ``trav_cost_`` is then ``default`` (None: the tracer's build
+    default, pbrt-v2's 1/8), ``fallback_`` is True and :meth:`note` says so; ``strict=True`` raises
+    instead. Fitted: ``c_node_``, ``c_test_``, ``mape_``, ``ratios_`` (dicts by kind), ``free_``
+    (kind -> (c_node, c_test) of the kinds left out), ``fallback_``, ``trav_cost_``."""
+
+    def __init__(self, default: float | None = None, strict: bool = False):
+        self.default, self.strict = default, strict
 
     def fit(self, points):
         self.c_node_, self.c_test_, self.mape_, self.ratios_, self.free_ = {}, {}, {}, {}, {}
@@ -143,31 +151,44 @@ class BvhSahFit:
                 continue
             self.c_node_[kind], self.c_test_[kind], self.ratios_[kind] = float(cn), float(ct), float(cn / ct)
             self.mape_[kind] = _metrics(y, A @ np.array([cn, ct]))["mape"]
-        if not self.ratios_:
+        self.fallback_ = not self.ratios_
+        if self.fallback_ and self.strict:
             from tracer.errors import GridcostError
             raise GridcostError("BVH cost fit: a node or a test came out free for every ray kind ("
                                 + "; ".join(f"{k} rays: c_node {cn:.3g}, c_test {ct:.3g} ns" for k, (cn, ct) in self.free_.items())
                                 + "); calibrate on more or larger meshes, or on a quieter machine")
-        self.trav_cost_ = float(np.exp(np.mean(np.log(list(self.ratios_.values())))))
+        if self.fallback_:
+            from tracer.bvh import BVH_TRAV_COST
+            self.trav_cost_ = float(BVH_TRAV_COST if self.default is None else self.default)
+        else:
+            self.trav_cost_ = float(np.exp(np.mean(np.log(list(self.ratios_.values())))))
         self.points_ = points
         return self
 
     def note(self) -> str:
-        """The kinds left out of the weight, and why ("" when every kind fitted)."""
-        return "; ".join(f"the {k}-ray fit left out: a {'test' if ct <= cn else 'node'} came out free "
-                         f"(c_node {cn:.3g}, c_test {ct:.3g} ns; timings this noisy cannot separate the two)"
-                         for k, (cn, ct) in self.free_.items())
+        """The kinds left out of the weight and why, and the fallback when every kind was ("" when
+        every kind fitted)."""
+        parts = [f"the {k}-ray fit left out: a {'test' if ct <= cn else 'node'} came out free "
+                 f"(c_node {cn:.3g}, c_test {ct:.3g} ns; timings this noisy cannot separate the two)"
+                 for k, (cn, ct) in self.free_.items()]
+        if self.fallback_:
+            parts.append(f"NO ray kind fitted, so the weight is the tracer's default {self.trav_cost_:.3g} "
+                         "(pbrt-v2), not a measurement of this host; calibrate on a quieter machine")
+        return "; ".join(parts)
 
     def summary(self) -> dict:
         return {"trav_cost": self.trav_cost_, "points": len(self.points_),
                 "scenes": sorted({p["scene"] for p in self.points_}), "kinds_left_out": sorted(self.free_),
+                "fallback": self.fallback_,
                 **{f"{k}_{name}": d[k] for k in self.ratios_
                    for name, d in (("c_node_ns", self.c_node_), ("c_test_ns", self.c_test_), ("ratio", self.ratios_),
                                    ("mape", self.mape_))}}
 
 
-def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, settings=BVH_SETTINGS, **measure) -> BvhSahFit:
+def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, settings=BVH_SETTINGS, strict: bool = False,
+                      **measure) -> BvhSahFit:
     """Measure the binary BVH at ``settings`` on ``scenes`` (or take ``points`` from
-    :func:`measure_kd_points` with ``structure="bvh"``) and fit :class:`BvhSahFit`."""
+    :func:`measure_kd_points` with ``structure="bvh"``) and fit :class:`BvhSahFit` (``strict``: raise
+    rather than fall back to the default weight when no ray kind fits)."""
     pts = points if points is not None else measure_kd_points(scenes, settings=settings, structure="bvh", **measure)
-    return BvhSahFit().fit(pts)
+    return BvhSahFit(strict=strict).fit(pts)

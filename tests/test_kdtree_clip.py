@@ -135,12 +135,20 @@ def test_bvh_sah_fit_recovers_the_weight_per_kind():
 
 
 def test_bvh_sah_fit_refuses_a_free_test():
-    """Times that do not grow with the tests (c_test fitted 0) give a clear error, not a zero weight;
-    when another ray kind fits, the weight is that kind's, and the kind left out is named."""
+    """Times that do not grow with the tests (c_test fitted 0) never give a zero or infinite weight:
+    with no kind fitted, strict raises a clear error and the default falls back to the tracer's
+    build weight (pbrt-v2's 1/8) and says so; when another ray kind fits, the weight is that kind's,
+    and the kind left out is named."""
     free = [{"scene": "s", "kind": "camera", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": 5e-9 * n}
             for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
     with pytest.raises(GridcostError, match="came out free for every ray kind"):
-        BvhSahFit().fit(free)
+        BvhSahFit(strict=True).fit(free)
+    with pytest.raises(GridcostError, match="came out free for every ray kind"):
+        fit_bvh_trav_cost(points=free, strict=True)
+    fb = BvhSahFit().fit(free)
+    assert fb.fallback_ and fb.trav_cost_ == 0.125 and fb.summary()["fallback"] is True
+    assert "NO ray kind fitted, so the weight is the tracer's default 0.125" in fb.note()
+    assert BvhSahFit(default=0.5).fit(free).trav_cost_ == 0.5
     good = [{"scene": "s", "kind": "random", "nodes": n, "leaves": 1.0, "tests": t, "s_per_ray": (20 * n + 10 * t) * 1e-9}
             for n, t in ((10, 3), (20, 1), (30, 4), (40, 2))]
     fit = BvhSahFit().fit(good + free)
@@ -148,3 +156,4 @@ def test_bvh_sah_fit_refuses_a_free_test():
     assert set(fit.free_) == {"camera"} and fit.free_["camera"][1] < 1e-6 * fit.free_["camera"][0]
     assert "camera-ray fit left out: a test came out free" in fit.note()
     assert fit.summary()["kinds_left_out"] == ["camera"] and BvhSahFit().fit(good).note() == ""
+    assert not fit.fallback_ and "NO ray kind" not in fit.note()

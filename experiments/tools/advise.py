@@ -61,8 +61,9 @@ PROBE_BUILD_MAX_S = 2.0
 MIN_SAMPLE_S = 0.05
 #: the BVH4 candidate's SAH weight is fitted on costmodel.kdcost.BVH_CALIBRATION; --quick: the same
 #: three meshes with fewer rays (two tiny scenes fitted well too, but three meshes leave more margin
-#: against a term coming out free on a loaded machine)
-BVH_SAH_QUICK = {"n_rays": 10_000, "repeats": 3}
+#: against a term coming out free on a loaded machine), each timed sample MIN_SAMPLE_S long (with
+#: 0.02 s samples a noisy cloud VM left both terms' split free: costmodel.kdcost.BvhSahFit)
+BVH_SAH_QUICK = {"n_rays": 10_000, "repeats": 3, "min_sample": MIN_SAMPLE_S}
 #: the files beside tracer/ that shape those points (their measurement key)
 BVH_SAH_CODE = ("costmodel/kdcost.py",)
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
