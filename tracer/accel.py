@@ -70,9 +70,13 @@ def as_rays(origins, directions) -> tuple[np.ndarray, np.ndarray]:
 
 
 def tmax_array(tmax, m: int) -> np.ndarray:
-    if tmax is None:
-        return np.full(m, np.inf, dtype=np.float32)
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(tmax, dtype=np.float32), (m,)))
+    """Per-ray tmax: a new writable C-contiguous float32 array of m values (inf for None; a scalar or
+    an (m,) array broadcast). Never a view of the caller's array: Numba types a read-only array
+    apart, and ``np.ascontiguousarray(np.broadcast_to(...))`` returned read-only views, which
+    compiled every kernel's any-hit variant twice (seen in ``wald-table3 --quick``: 13-35 s each)."""
+    out = np.empty(m, dtype=np.float32)
+    out[:] = np.inf if tmax is None else np.asarray(tmax, dtype=np.float32)
+    return out
 
 
 class Accel:

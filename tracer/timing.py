@@ -119,8 +119,17 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     """Call ``fn`` ``warmup`` times untimed (JIT compilation, caches), then take ``repeats`` samples;
     a sample runs ``fn`` back to back until it lasts ``min_sample`` seconds and is reported per call.
     ``clock`` defaults to :func:`default_clock`."""
-    clock = clock or default_clock()
     _CALLS[0] += 1
+    runs = sample_calls(fn, repeats, warmup, min_sample, clock)
+    return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
+
+
+def sample_calls(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
+                 min_sample: float = MIN_SAMPLE_SECONDS, clock: Callable[[], float] | None = None) -> list[float]:
+    """:func:`time_call`'s samples (seconds per call), without counting as a timing of the run
+    (the timing-noise meter, ``experiments.core.noise``, uses it so a file drawn from stored points
+    is still told apart from one measured now)."""
+    clock = clock or default_clock()
     for _ in range(warmup):
         fn()
     t0 = clock()
@@ -133,7 +142,7 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
         for _ in range(number):
             fn()
         runs.append((clock() - t0) / number)
-    return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
+    return runs
 
 
 def time_single_pass(trace: Callable, o: np.ndarray, d: np.ndarray, chunks: int = 1, warm: int = 0,

@@ -23,28 +23,12 @@ import numpy as np
 MEM_BYTES = 8 << 20
 
 
-def _samples(fn, n: int, min_sample: float, clock) -> np.ndarray:
-    """``n`` per-call times of ``fn``, each sample back-to-back calls lasting ``min_sample`` s."""
-    fn()
-    t0 = clock()
-    fn()
-    once = max(clock() - t0, 1e-9)
-    number = max(1, int(np.ceil(min_sample / once)))
-    out = np.empty(n)
-    for i in range(n):
-        t0 = clock()
-        for _ in range(number):
-            fn()
-        out[i] = (clock() - t0) / number
-    return out
-
-
 def timing_noise(samples: int = 11, min_sample: float = 0.02) -> dict:
     """{clock, samples, compute_cv, compute_spread, memory_cv, memory_spread} of this host now."""
     import numba
 
     from tracer.machine import LINE, _chase, _cycle
-    from tracer.timing import _probe_kernel, clock_name, default_clock
+    from tracer.timing import _probe_kernel, clock_name, default_clock, sample_calls
     if samples < 2:
         raise ValueError(f"timing_noise needs at least 2 samples, got {samples}")
     x = np.arange(1 << 16, dtype=np.float64)
@@ -56,7 +40,7 @@ def timing_noise(samples: int = 11, min_sample: float = 0.02) -> dict:
         clock = default_clock()  # the one-thread clock (thread CPU time where it sees the kernels' work)
         out = {"clock": clock_name(), "samples": samples}
         for name, fn in (("compute", lambda: _probe_kernel(x, 4)), ("memory", lambda: _chase(nxt, 0, lines))):
-            t = _samples(fn, samples, min_sample, clock)
+            t = np.array(sample_calls(fn, samples, 1, min_sample, clock))
             out[f"{name}_cv"] = round(float(t.std(ddof=1) / t.mean()), 4)
             out[f"{name}_spread"] = round(float(np.ptp(t) / np.median(t)), 4)
     finally:
