@@ -1,8 +1,13 @@
 """Shared fixtures: a per-session mesh cache, the small test scenes, mesh-file writers and a CLI runner.
 
 The parsed-mesh cache ($GRIDCOST_CACHE) points at a session temporary directory, set before any
-scene is loaded, so tests never read or write the user's ``~/.cache/gridcost`` and subprocesses
-(the CLI tests) inherit the same directory.
+scene is loaded, so tests never read or write the user's meshes and points in ``~/.cache/gridcost``
+and subprocesses (the CLI tests) inherit the same directory. Compiled kernels are the exception:
+every test process, xdist worker and CLI subprocess shares the one Numba cache the tests' own
+imports use ($GRIDCOST_NUMBA_CACHE, exported here; its folders are named by the tracer's source
+digest, so a kernel is never reused across a source change). Without it each worker's subprocesses
+followed $GRIDCOST_CACHE into their own folder and compiled every kernel again (CI: 216 s for
+``all --quick``).
 """
 from __future__ import annotations
 
@@ -14,6 +19,10 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+
+if not os.environ.get("GRIDCOST_NUMBA_CACHE"):
+    from tracer.provenance import numba_cache_dir
+    os.environ["GRIDCOST_NUMBA_CACHE"] = str(numba_cache_dir().parent)
 
 #: the small scenes the structure tests run on (each loads/builds in well under a second)
 SMALL_SCENES = ("bunny-948", "cornell", "cylinder-196", "particles-2000")
