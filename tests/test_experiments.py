@@ -146,6 +146,10 @@ def test_all_quick_into_a_fresh_folder(tmp_path):
             df = pd.read_csv(csv)
             assert {"commit", "host", "clock"} <= set(df.columns), csv
             assert df.commit.notna().all(), csv
+    # the BVH4's SAH weight advise used, and whether it was fitted or fell back (costmodel.kdcost.BvhSahFit)
+    sah = re.search(r"The BVH4's SAH weight C_trav/C_isect: ([0-9.]+) \((.*)\)\.", (out / "advise-check" / "summary.md").read_text())
+    assert sah and float(sah.group(1)) > 0
+    assert sah.group(2) == "fitted on this host, every ray kind" or "left out" in sah.group(2), sah.group(2)
     for target in FIGURE_TARGETS:
         for ext in ("png", "pdf"):
             f = out / "paper_figs" / f"{target}.{ext}"

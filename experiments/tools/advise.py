@@ -100,7 +100,7 @@ def calibration(ctx, log) -> dict:
            "quick": bool(ctx.quick), **(BVH_SAH_QUICK if ctx.quick else {})}
     pts, cached = ctx.store(code=BVH_SAH_CODE).measure(key, bvh_sah_points, bool(ctx.quick))
     sah = fit_bvh_trav_cost(points=pts)
-    out = {"bvh4_trav_cost": sah.trav_cost_}
+    out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah_note": sah.note()}
     log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: C_trav/C_isect "
         f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})"
         + (f"; {sah.note()}" if sah.free_ else ""))

@@ -140,7 +140,9 @@ def main(ctx, args) -> int:
     md = _summary(df, cdf, {**MESHES, **QUICK_MESHES}, n_rays, repeats) + (
         f"\nClock of the traces: {clock_name()}; 1-minute load average {load[0]:.1f} at the start, {load[1]:.1f} at the "
         f"end, on {os.cpu_count()} cores (above the core count, other processes take turns with these timings: "
-        f"per-ray times of one candidate measured minutes apart — probe and truth — differ by their loads).\n")
+        f"per-ray times of one candidate measured minutes apart — probe and truth — differ by their loads).\n"
+        f"\nThe BVH4's SAH weight C_trav/C_isect: {cal['bvh4_trav_cost']:.3g}"
+        + (f" ({cal['bvh4_sah_note']}).\n" if cal.get("bvh4_sah_note") else " (fitted on this host, every ray kind).\n"))
     atomic_write(out_dir / "summary.md", md)
     ctx.write_meta(out_dir, "advise-check", started, threads=threads, rays=n_rays, repeats=repeats,
                    scenes=names, quick=args.quick, load_average=load)
