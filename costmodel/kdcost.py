@@ -19,6 +19,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from costmodel.fit import _metrics
+from tracer.timing import MIN_SAMPLE_SECONDS
 
 #: build settings measured by default: trees of different shapes (depth, clipping) so the node,
 #: leaf and test counts vary independently enough to separate their costs
@@ -73,11 +74,11 @@ class KdCostFit:
 
 def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTINGS, n_rays: int = 50_000,
                       repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree",
-                      min_sample: float | None = None) -> list[dict]:
+                      min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
     """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
     per-ray means of the counters and the median seconds per ray of the non-counting kernel
-    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` (None: its
-    default) as :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
+    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` as
+    :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
     ``scenes`` are Scene objects or registry names. Run it single-threaded."""
     from tracer.accel import build
     from tracer.rays import make_rays
@@ -92,7 +93,7 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
             for kind, r in rays.items():
                 _, cnt = kd.intersect(r.origins, r.directions, counters=True)
                 tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats,
-                               clock=clock, **({} if min_sample is None else {"min_sample": min_sample}))
+                               clock=clock, min_sample=min_sample)
                 m = cnt.mean()
                 out.append({"scene": scene.name, "kind": kind, "params": dict(params), "rays": r.n,
                             "nodes": m["nodes"], "leaves": m["steps"], "tests": m["tests"],
