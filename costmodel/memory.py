@@ -177,6 +177,55 @@ class MemoryCostFit:
         return s + self.work(frame)
 
 
+#: where a scene's own calibration points sit: quantiles of log M over its swept range (wide apart,
+#: so the steps and tests they count differ enough to separate Ts0 from Ti)
+CALIBRATION_QUANTILES = (0.1, 0.5, 0.9)
+
+
+def calibration_rows(frame, x: str = "cells", quantiles=CALIBRATION_QUANTILES):
+    """The rows of one scene's sweep nearest the ``quantiles`` of log ``x`` over its range: the few
+    timed points :class:`SceneCalibratedFit` is fitted to (duplicates of ``x`` dropped)."""
+    g = frame.sort_values(x).drop_duplicates(x)
+    lx = np.log(g[x].to_numpy(float))
+    idx = sorted({int(np.argmin(np.abs(lx - (lx.min() + q * (lx.max() - lx.min()))))) for q in quantiles})
+    return g.iloc[idx]
+
+
+class SceneCalibratedFit(MemoryCostFit):
+    """A pooled fit's memory term kept, the work constants refitted on a few of the scene's own points:
+
+        T_ray = Tsetup_s + Ts0_s steps + Ti_s tests + kappa * memory_feature     (kappa from ``pooled``)
+
+    A step and a test cost different amounts from scene to scene (table2's AIC asks for per-scene
+    constants; room's marginal test costs about 4 ns against 11-13 ns on the scans), and no counter
+    or working set of the other scenes has carried that over; three timed points of the scene do
+    (:func:`calibration_rows`), a sixth of a sweep. ``kappa`` (the share of a load's
+    latency that stalls a ray) stays the one fitted on the other scenes: three points cannot also
+    separate it. Needs as many points with distinct counters as constants (3)."""
+
+    def __init__(self, pooled: MemoryCostFit):
+        super().__init__(pooled.machine, pooled.memory)
+        self.pooled = pooled
+
+    def fit(self, frame, T):
+        T = np.asarray(T, float)
+        steps, tests, mem = self._work_columns(frame)
+        X = np.column_stack([np.ones(len(T)), steps, tests])
+        if len(T) < X.shape[1] or np.linalg.matrix_rank(X) < X.shape[1]:
+            raise ValueError(f"SceneCalibratedFit needs {X.shape[1]} points with distinct steps and tests, got "
+                             f"{len(T)} of rank {np.linalg.matrix_rank(X)}")
+        kappa = self.pooled.kappa_ if self.memory else 0.0
+        w = 1.0 / T
+        coef, _ = nnls(X * w[:, None], (T - kappa * mem) * w)
+        self.scenes_ = list(dict.fromkeys(frame["scene"]))
+        self.tsetup_ = {s: float(coef[0]) for s in self.scenes_}
+        self.coef_ = np.array([coef[1], coef[2], kappa])
+        self.ts0_, self.ti_, self.kappa_ = (float(v) for v in self.coef_)
+        self.n_constants_ = 3
+        self.metrics_ = _metrics(T, coef[0] + np.column_stack([steps, tests, mem]) @ self.coef_)
+        return self
+
+
 def entry_feature(machine, setups, cells, memory_bytes) -> np.ndarray:
     """setups * x(B_cells) (ns): the load of the cell a ray enters the grid by, at a random place in
     the cell array, priced at the latency of the array's working set over an L1 hit. A ray's later

@@ -63,6 +63,40 @@ def test_memory_fit_recovers_constants():
     assert f[f.scene == "c"].cells.min() <= m_opt <= f[f.scene == "c"].cells.max()
 
 
+def test_scene_calibration_recovers_a_scene_whose_test_is_cheap():
+    """Pooled on scenes whose test costs 12 ns, held out on one whose test costs 3 ns: the pooled model
+    puts that scene's optimum far too high; three of the scene's own points recover its constants
+    exactly (kappa kept from the pool) and its optimum."""
+    mach = _fake_machine()
+
+    def frame(s, n):
+        cells = np.geomspace(n / 8, 64 * n, 19)
+        steps, tests = 2 * cells ** (1 / 3), 4 * n / cells ** (2 / 3) + 1
+        return pd.DataFrame({"scene": s, "cells": cells, "steps": steps, "tests": tests, "occupied": 0.3 * steps,
+                             "memory_bytes": 4 * cells + 60 * n})
+
+    def time(f, ti):
+        return 50 + 3.0 * f.steps + ti * f.tests + 0.4 * mm.memory_feature(mach, f.steps, f.occupied, f.cells, f.memory_bytes)
+
+    train = pd.concat([frame("a", 1000), frame("b", 5000), frame("c", 20000)], ignore_index=True)
+    pooled = mm.MemoryCostFit(mach).fit(train, time(train, 12.0))
+    room = frame("room", 10000)
+    T = time(room, 3.0)
+    pts = mm.calibration_rows(room)
+    assert len(pts) == 3 and pts.cells.is_monotonic_increasing
+    assert pts.cells.iloc[0] < room.cells.median() < pts.cells.iloc[-1]
+    cal = mm.SceneCalibratedFit(pooled).fit(pts, T[pts.index])
+    assert cal.ts0_ == pytest.approx(3.0, rel=1e-3) and cal.ti_ == pytest.approx(3.0, rel=1e-3)
+    assert cal.kappa_ == pooled.kappa_ and cal.tsetup_["room"] == pytest.approx(50.0, rel=1e-3)
+    np.testing.assert_allclose(cal.predict(room), T, rtol=1e-3)
+    best = float(room.cells[int(np.argmin(T))])
+    m_pool, m_cal = mm.model_optimum(pooled, room), mm.model_optimum(cal, room)
+    assert m_pool > 2 * best  # the pool's 12 ns test buys cells this scene does not need
+    assert best / 1.5 < m_cal < best * 1.5
+    with pytest.raises(ValueError, match="needs 3 points"):
+        mm.SceneCalibratedFit(pooled).fit(pts.iloc[:2], T[pts.index[:2]])
+
+
 def test_entry_refs_fit_recovers_constants_and_paper_fit_keeps_its_ratio():
     rng = np.random.default_rng(1)
     mach = _fake_machine()
