@@ -53,3 +53,19 @@ def test_pick_is_the_simplest_within_tolerance():
     assert predict._pick({"paper": 5.0, "counter": 4.5, "memory-aware": 4.4, "entry-refs": 4.2}) == "paper"
     assert predict._pick({"paper": 9.0, "counter": 8.0, "memory-aware": 7.5, "entry-refs": 6.0}) == "entry-refs"
     assert predict._pick({"paper": 9.0, "counter": 6.9, "memory-aware": 7.5, "entry-refs": 6.0}) == "counter"
+
+
+def test_three_scene_points_recover_a_scene_unlike_the_others():
+    """A held-out scene whose test costs 3 ns (the others: 12 ns): the pooled model misses it; with
+    Ts0 and Ti refitted on three of its points the error is the noise's, and the cost counts them."""
+    mach = _machine()
+    f = _sweeps(mach, 0.0, 0.0)
+    odd = f.scene == "s5"
+    f.loc[odd, "anchored_ns_per_ray"] -= 9.0 * f.loc[odd, "tests"]
+    others = [f"s{k}" for k in range(5)]
+    pooled = predict.holdout(f, "s5", others, "memory-aware", mach)
+    cal = predict.holdout(f, "s5", others, "memory-aware", mach, calibrate=True)
+    assert cal["model"] == predict.CALIBRATED
+    assert pooled["mape_pct"] > 10.0 and cal["mape_pct"] < 1.0
+    assert cal["penalty_pct"] < 1.0 < pooled["penalty_pct"]
+    assert cal["calibration_s"] == pytest.approx(len(others) * 9 * 0.1 + 3 * 0.1)
