@@ -258,3 +258,29 @@ def test_point_hits_is_the_fraction_of_all_rays():
     (row,) = measure(scene, "grid", {"cells": 500.0}, {"synthetic": r}, repeats=1, min_sample=0.0)
     assert truth == 0.5
     assert row["hits"] == truth
+
+
+def test_paired_rounds_are_added_until_the_penalty_is_known():
+    """time_paired adds rounds while ``more`` asks (up to max_rounds); the stop rule of the paired
+    penalties asks while a target's 95 % interval is wider than ±half-width; the interval of a median
+    is the binomial order statistics."""
+    from experiments.core.sweep import _unsettled, penalty_ci
+    from tracer.timing import median_ci, time_paired
+    x = np.arange(11.0)
+    assert median_ci(x) == (1.0, 9.0)  # P(B <= 1) = 12/2048 each side: 98.8 % coverage
+    assert median_ci(np.arange(41.0)) == (13.0, 27.0)
+    assert median_ci(np.arange(5.0)) == (0.0, 4.0)
+    rng = np.random.default_rng(0)
+    quiet = {0: list(1.0 + 0.001 * rng.standard_normal(11)), 1: list(1.1 + 0.001 * rng.standard_normal(11))}
+    noisy = {0: list(1.0 + 0.2 * rng.random(11)), 1: list(1.1 + 0.2 * rng.random(11))}
+    assert not _unsettled([1], 2.0)(quiet)
+    assert _unsettled([1], 2.0)(noisy)
+    assert _unsettled([0], 2.0)(noisy)  # the fastest: its interval against the next fastest
+    lo, hi = penalty_ci(quiet, 1, 0)
+    assert 9.0 < lo < 10.0 < hi < 11.0
+    calls = []
+    fns = {"a": lambda: calls.append("a"), "b": lambda: calls.append("b")}
+    out = time_paired(fns, rounds=3, repeats=1, min_sample=0.0, more=lambda t: len(t["a"]) < 5, max_rounds=9)
+    assert len(out["a"]) == len(out["b"]) == 5
+    assert len(time_paired(fns, rounds=3, repeats=1, min_sample=0.0, more=lambda t: True, max_rounds=9)["a"]) == 9
+    assert len(time_paired(fns, rounds=3, repeats=1, min_sample=0.0)["a"]) == 3

@@ -176,15 +176,20 @@ def time_single_pass(trace: Callable, o: np.ndarray, d: np.ndarray, chunks: int 
 
 
 def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[], float] | None = None,
-                min_sample: float = MIN_SAMPLE_SECONDS) -> dict:
+                min_sample: float = MIN_SAMPLE_SECONDS, more: Callable[[dict], bool] | None = None,
+                max_rounds: int | None = None) -> dict:
     """Time several callables in interleaved rounds (each round times every callable once with
     :func:`time_call`), so slow drifts of a shared machine hit all of them alike. Returns name ->
     list of per-round median seconds; compare callables by the median of per-round ratios
-    (:func:`paired_ratio`), not by ratios of separately taken medians."""
+    (:func:`paired_ratio`), not by ratios of separately taken medians. After ``rounds`` rounds,
+    one more round is timed while ``more(times so far)`` is true, up to ``max_rounds`` in all."""
     out = {k: [] for k in fns}
     for fn in fns.values():
         fn()  # warm-up (JIT compilation, caches) before the first round
-    for _ in range(max(1, rounds)):
+    limit = max(1, rounds) if more is None else max(1, rounds, max_rounds or 0)
+    for r in range(limit):
+        if r >= max(1, rounds) and not more(out):
+            break
         for k, fn in fns.items():
             out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock, min_sample=min_sample).median)
     return out
@@ -194,6 +199,17 @@ def paired_ratio(times: dict, a: str, b: str) -> tuple[float, float, float]:
     """Median, min and max over rounds of times[a] / times[b] (from :func:`time_paired`)."""
     r = np.asarray(times[a]) / np.asarray(times[b])
     return float(np.median(r)), float(r.min()), float(r.max())
+
+
+def median_ci(x, level: float = 0.95) -> tuple[float, float]:
+    """Distribution-free confidence interval of the median of ``x``: the order statistics whose
+    binomial(n, 1/2) tail holds (1 - level)/2 each side (conservative; the whole range when n < 6)."""
+    from scipy.stats import binom
+    v = np.sort(np.asarray(x, float))
+    n = len(v)
+    k = int(binom.ppf((1.0 - level) / 2.0, n, 0.5))  # P(B < k) <= alpha/2 with B ~ binom(n, 1/2)
+    lo = max(k - 1, 0)
+    return float(v[lo]), float(v[n - 1 - lo])
 
 
 def set_threads(n: int | None) -> int:

@@ -94,11 +94,14 @@ def nearest(rows_df, cells: float):
 
 
 def penalty_range(pp: dict) -> str:
-    """The rounds' range of a paired penalty as text; for the fastest point, "fastest" and its range
-    against the next fastest (negative: how much faster) instead of a point divided by itself."""
+    """A paired penalty's 95 % interval (:func:`penalty_ci`; the rounds' min..max for points stored
+    before it was kept) and the rounds it took, as text; for the fastest point, "fastest" and its
+    interval against the next fastest (negative: how much faster) instead of a point divided by itself."""
+    lo, hi = pp.get("ci_pct") or (pp["min_pct"], pp["max_pct"])
+    n = f", {pp['rounds']} rounds" if "ci_pct" in pp else ""
     if pp.get("fastest"):
-        return f"fastest ({pp['min_pct']:.1f}..{pp['max_pct']:.1f} vs next)"
-    return f"{pp['min_pct']:.1f}..{pp['max_pct']:.1f}"
+        return f"fastest ({lo:.1f}..{hi:.1f} vs next{n})"
+    return f"{lo:.1f}..{hi:.1f}{n}"
 
 
 def penalty_pct(t, best) -> float:
@@ -110,14 +113,42 @@ def penalty_pct(t, best) -> float:
 #: ``repeats`` samples); quick runs use fewer
 PAIRED_ROUNDS, PAIRED_REPEATS = 11, 5
 QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS = 3, 3
+#: noise-aware paired penalties (full runs): after PAIRED_ROUNDS, rounds are added one at a time until
+#: the 95 % interval of every target's median per-round ratio to the best is at most
+#: PAIRED_HALF_WIDTH_PCT wide each side (or PAIRED_MAX_ROUNDS are timed); on a noisy host 11 rounds
+#: cannot tell a 5 % penalty from none
+PAIRED_MAX_ROUNDS, PAIRED_HALF_WIDTH_PCT = 41, 2.0
 
 
 def _paired_budget(quick: bool) -> tuple[int, int, dict]:
     """(rounds, repeats per round, the key's extra timing settings) of side-by-side timing; --quick
-    also takes shorter samples (QUICK_MIN_SAMPLE)."""
+    also takes shorter samples (QUICK_MIN_SAMPLE) and never adds rounds."""
     if quick:
         return QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS, {"min_sample": QUICK_MIN_SAMPLE}
-    return PAIRED_ROUNDS, PAIRED_REPEATS, {}
+    return PAIRED_ROUNDS, PAIRED_REPEATS, {"max_rounds": PAIRED_MAX_ROUNDS, "half_width_pct": PAIRED_HALF_WIDTH_PCT}
+
+
+def penalty_ci(times: dict, target, best) -> tuple[float, float]:
+    """95 % interval (%, :func:`tracer.timing.median_ci`) of the median per-round ratio of ``target``
+    to ``best`` (lists of per-round seconds in ``times``), as a penalty."""
+    from tracer.timing import median_ci
+    lo, hi = median_ci(np.asarray(times[target]) / np.asarray(times[best]))
+    return penalty_pct(lo, 1.0), penalty_pct(hi, 1.0)
+
+
+def _unsettled(targets, half_width_pct: float):
+    """``more`` of :func:`tracer.timing.time_paired`: true while the interval of some target's
+    penalty against the current best (fastest by median; against the next fastest for the best
+    itself) is wider than ``half_width_pct`` on either side."""
+    def more(times: dict) -> bool:
+        med = {i: float(np.median(v)) for i, v in times.items() if isinstance(i, int)}
+        order = sorted(med, key=med.get)
+        for i in targets:
+            lo, hi = penalty_ci(times, i, order[1] if i == order[0] and len(order) > 1 else order[0])
+            if (hi - lo) / 2.0 > half_width_pct:
+                return True
+        return False
+    return more
 
 
 def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict], rays, store: PointStore,
@@ -144,8 +175,10 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     done = store.get(spec)
     if done is not None:
         return done
+    adapt = ([points.index(p) for p in targets.values()], timing["max_rounds"], timing["half_width_pct"]) \
+        if "max_rounds" in timing else None
     tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others,
-                    timing.get("min_sample"))
+                    timing.get("min_sample"), adapt)
     med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
     best = min(med, key=med.get)
     out = {}
@@ -156,9 +189,9 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
         other = min((j for j in med if j != i), key=med.get) if fastest_ else best
         ratio, lo, hi = paired_ratio(tp, i, other)
         out[name] = {"penalty_pct": 0.0 if fastest_ else penalty_pct(ratio, 1.0), "min_pct": penalty_pct(lo, 1.0),
-                     "max_pct": penalty_pct(hi, 1.0), "fastest": bool(fastest_),
+                     "max_pct": penalty_pct(hi, 1.0), "fastest": bool(fastest_), "ci_pct": list(penalty_ci(tp, i, other)),
                      "vs_next_pct": penalty_pct(ratio, 1.0) if fastest_ else None, "target_ns": med[i] / rays.n * 1e9,
-                     "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": rounds,
+                     "best_ns": med[best] / rays.n * 1e9, "best_params": points[best], "rounds": len(tp[i]),
                      "speedup": {o: paired_ratio(tp, o, i)[0] for o in (others or {})}}
     store.put(spec, out, provenance=prov)
     return out
@@ -171,17 +204,20 @@ def _run(store: PointStore, fn, *args):
     return store.ctx.run_task(store, fn, *args)
 
 
-def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None, min_sample=None) -> dict:
+def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=None, min_sample=None,
+                       adapt=None) -> dict:
     """Build every point (index -> structure) and each of ``others`` (name -> (structure, params)),
     then time them all in interleaved rounds: index or name -> per-round seconds (samples of at
-    least ``min_sample`` seconds; None: the default)."""
+    least ``min_sample`` seconds; None: the default). ``adapt`` = (target indices, max rounds,
+    half-width %) adds rounds until the targets' penalties are known that well (:func:`_unsettled`)."""
     from tracer.timing import MIN_SAMPLE_SECONDS, time_paired
     accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
     for name, (st, p) in (others or {}).items():
         accels[name] = build(scene, st, **p)
+    more = dict(more=_unsettled(adapt[0], adapt[2]), max_rounds=adapt[1]) if adapt else {}
     return time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
                         for i, a in accels.items()}, rounds=rounds, repeats=repeats,
-                       min_sample=MIN_SAMPLE_SECONDS if min_sample is None else min_sample)
+                       min_sample=MIN_SAMPLE_SECONDS if min_sample is None else min_sample, **more)
 
 
 def paired_plane(scene, structure: str, points: list[dict], rays, store: PointStore, quick: bool = False) -> np.ndarray:
@@ -191,6 +227,7 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
     directly rather than through the reference each sweep point is timed beside. Stored in ``store``
     (resumable)."""
     rounds, repeats, timing = _paired_budget(quick)
+    timing = {k: v for k, v in timing.items() if k == "min_sample"}  # a plane is timed in fixed rounds
     spec = {"paired_plane": 1, "scene": scene.name, "N": scene.n, "structure": structure, "points": points,
             "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats, **timing}
     done = store.get(spec)

@@ -141,7 +141,8 @@ def _summary(tab, n_rays, repeats, threads, quick) -> str:
              "to every sub-grid's triangle count, k = 1, Ti/Ts = 4); L = 2 uses M1 = (8N)^(3/5), M2 = 8 N2 (Table 4). "
              f"Sweep ({repeats} rounds beside the scene's 8N grid per point): {sweep_txt}. Then per L and ray kind the "
              "theory's M1, the two fastest swept M1 of the same L and the fastest swept one-level grid are re-timed "
-             "side by side in interleaved rounds (median of per-round ratios; range over rounds in brackets).", "",
+             "side by side in interleaved rounds (median of per-round ratios; in brackets its 95 % interval and the "
+             "rounds timed: rounds are added, from 11 up to 41, until every interval is within ±2 points).", "",
              "Columns: **penalty** = time of the theory's M1 over the fastest M1 of the same L (paired, %); "
              "**speed-up** = time of the fastest swept one-level grid over the theory's L-level grid (paired, x); "
              "**L3/L2** = the L = 3 speed-up divided by the L = 2 speed-up (> 1: three levels faster; the two "

@@ -163,15 +163,15 @@ def _verdict(tab, pool) -> str:
         for _, r in tab[tab[f"{col}_pct"] > 5].iterrows():
             rng = str(r[f"{col}_range"])
             near = float(rng.split("..")[0]) <= 5
-            over.append(f"{label} on {r.scene}, {r[f'{col}_pct']:.1f} % (rounds {rng} %"
-                        + ("; within the scatter of the rounds)" if near else ")"))
+            over.append(f"{label} on {r.scene}, {r[f'{col}_pct']:.1f} % (95 % interval {rng}"
+                        + ("; 5 % is inside it)" if near else ")"))
     if not over:
         return ("The runtime curve is flat near its minimum, so both theoretical choices of M stay within "
                 "the paper's 5 %.")
     return ("Above the paper's 5 %: " + "; ".join(over) + ". Look at the per-scene curves in "
             "paper_figs/table2.png: a penalty this size means a curve that is not flat at its minimum (small N, "
             "where M is a few hundred cells and the integer resolution jumps), a scene whose cost does not follow "
-            "Eq 1, or, where the rounds scatter across 5 %, a curve so flat that the rounds cannot rank its points.")
+            "Eq 1, or, where the interval holds 5 %, a curve so flat that the rounds cannot rank its points.")
 
 
 def _fmt(v, pct=False):
@@ -190,7 +190,8 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
         f"condition number {cfit.cond_:.1f}) — the paper's is 4, giving M = 8N.", "",
         "Penalties are re-measured side by side: the theory's M and the three fastest swept M are timed in "
         "interleaved rounds, and the penalty is the median over rounds of the theory's time over the fastest's "
-        "(range over rounds in brackets; 0 when the theory's M is itself the fastest). The sweep's own "
+        "(in brackets its 95 % interval and the rounds timed: after 11, rounds are added until every interval is "
+        "within ±2 points or 41 are timed; 0 when the theory's M is itself the fastest). The sweep's own "
         "penalty (each point timed beside the scene's 8N grid, minutes apart from the others; its minimum, "
         "the lowest of many noisy points, is biased low) is in the last column.", "",
         f"One (Ts, Ti) pair for all scenes, or one per scene? AIC on the relative residuals: pooled "
