@@ -19,7 +19,8 @@ def test_rule_cells_and_the_memory_rule(load):
     rules = stability.rule_cells(scene, 4.0)
     assert rules["8N (Ize Eq 4, Ti/Ts = 4)"] == 8 * 948 == rules["2N·Ti/Ts (Eq 4, Ti/Ts fitted here)"]
     assert stability.MEMORY_AWARE not in rules
-    assert stability.rule_cells(scene, 4.0, 1234.0)[stability.MEMORY_AWARE] == 1234.0
+    got = stability.rule_cells(scene, 4.0, {stability.MEMORY_AWARE: 1234.0, stability.MEMORY_CALIBRATED: 99})
+    assert got[stability.MEMORY_AWARE] == 1234.0 and got[stability.MEMORY_CALIBRATED] == 99.0
 
 
 def test_time_at_interpolates_in_log_log_and_never_extrapolates():

@@ -1,7 +1,7 @@
 """``stability``: where each resolution rule fails — the penalty of every rule (Ize's 8N and
 2N·Ti/Ts, the long-skinny 8N^1.5, pbrt's 3N^(1/3) voxels along the longest axis clamped at 64, Wald's
 lambda = 5, Ize's two-level grid M1 = (8N)^0.6, M2 = 8 N2, and the memory-aware model's M with
-constants held out) against the best swept one-level M, for every scene family of
+constants held out, and with Ts0 and Ti from three of the scene's own swept points) against the best swept one-level M, for every scene family of
 ``exponents`` (compact scans, CAD, long skinny cylinders, scattered particles, teapot in a stadium)
 from about 200 to 871k triangles.
 
@@ -41,11 +41,14 @@ TWO_LEVEL = "(8N)^0.6 two-level (Ize Eq 12-13, M2 = 8 N2)"
 TWO_LEVEL_PARAMS = {"levels": 2}
 #: the memory-aware rule (experiments.ize.memmodel: costmodel.memory's model, constants from the other scenes)
 MEMORY_AWARE = "memory-aware (held-out constants)"
+#: ... with Tsetup, Ts0 and Ti refitted on three of the scene's swept points (costmodel.memory.SceneCalibratedFit)
+MEMORY_CALIBRATED = "memory-aware, 3 scene points"
 
 
-def rule_cells(scene, ti_over_ts: float, memory_m: float | None = None) -> dict:
-    """Cell count of every one-level rule for ``scene`` (rule name -> M); ``memory_m``, the
-    memory-aware model's M (:func:`experiments.ize.memmodel.memory_aware_cells`), when given."""
+def rule_cells(scene, ti_over_ts: float, memory: dict | None = None) -> dict:
+    """Cell count of every one-level rule for ``scene`` (rule name -> M), and the model rules of
+    ``memory`` (name -> M, e.g. :data:`MEMORY_AWARE` -> the M of
+    :func:`experiments.ize.memmodel.memory_aware_cells`), when given."""
     from tracer.grid import res_pbrt, res_wald
     n = scene.n
     out = {"8N (Ize Eq 4, Ti/Ts = 4)": IZE_M_FACTOR * n,
@@ -53,8 +56,7 @@ def rule_cells(scene, ti_over_ts: float, memory_m: float | None = None) -> dict:
            "8N^1.5 (Ize Eq 8, long skinny)": IZE_M_FACTOR * n**1.5,
            f"pbrt 3N^(1/3), <= {PBRT_GRID_MAX_VOXELS}": float(np.prod(res_pbrt(scene.bounds, n))),
            f"Wald lambda = {WALD_LAMBDA:g}": float(np.prod(res_wald(scene.bounds, n)))}
-    if memory_m is not None:
-        out[MEMORY_AWARE] = float(memory_m)
+    out.update({k: float(v) for k, v in (memory or {}).items()})
     return out
 
 
@@ -108,8 +110,9 @@ def main(ctx, args) -> int:
         best_M = float(k.loc[k.anchored_ns_per_ray.idxmin()].cells)
         base = {"family": family, "scene": name, "N": scene.n, "best_M": best_M, "rays": int(k.rays.iloc[0]),
                 "sweep_spread_pct": 100 * float(k.spread.median())}
-        mem_m = memmodel.memory_aware_cells(pts, name, "random", mach)[0]
-        for rule, m in rule_cells(scene, ratio, mem_m).items():
+        mem = {rule: memmodel.memory_aware_cells(pts, name, "random", mach, calibrate=cal)[0]
+               for rule, cal in ((MEMORY_AWARE, False), (MEMORY_CALIBRATED, True))}
+        for rule, m in rule_cells(scene, ratio, mem).items():
             t = time_at(k.cells.values, k.anchored_ns_per_ray.values, m)
             rows.append({**base, "rule": rule, "M": m, "M_over_N": m / scene.n,
                          "penalty_pct": 100 * (t / best - 1) if np.isfinite(t) else np.nan,
@@ -158,7 +161,9 @@ def _summary(df: pd.DataFrame, ratio: float) -> str:
              "nested grid on the same rays, timed beside the same 8N reference; its penalty is its ratio to the reference over the best one-level point's ratio (negative: faster than every one-level M). "
              f"Ti/Ts of 2N·Ti/Ts = {ratio:.2f} (counter model, pooled over every point). Memory-aware: the M "
              "minimising costmodel.memory's model (counters + the host's load latency at the grid's working set), "
-             "its constants fitted on every other scene of the map (held out).", "",
+             "its constants fitted on every other scene of the map (held out); with 3 scene points: Tsetup, Ts0 "
+             "and Ti refitted on the scene's swept points nearest the 10/50/90 % quantiles of log M (kappa still held "
+             "out; those points are also on the curve its penalty is read from).", "",
              "Sweep spread: the median over the scene's swept points of (slowest - fastest) / median of a point's "
              "repeats (its timing noise); penalties below it are not resolved.", "",
              "| family | scene | N | sweep spread % | " + " | ".join(rules) + " |", "|---|---|---|---|" + "---|" * len(rules)]
