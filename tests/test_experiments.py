@@ -232,25 +232,21 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     # one Numba thread: the clock is then this thread's CPU time, which the other xdist worker's load
     # does not inflate (with both threads and wall time it moved the one-cell grid's ratio to 7.8)
     import numba
+    from experiments.core.sweep import REFERENCE, sweep
     from tracer.timing import set_threads
     threads = numba.get_num_threads()
     set_threads(1)
     try:
-        _sweep_beside_reference(scene, rays, store, tmp_path)
+        rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
+        more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
     finally:
         set_threads(threads)
-
-
-def _sweep_beside_reference(scene, rays, store, tmp_path):
-    from experiments.core.sweep import REFERENCE, sweep
-    rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
     ref, one = rows
     assert 0.25 < ref["ratio_to_ref"] < 4.0
     assert one["ratio_to_ref"] > 16  # one cell: every ray tests every triangle
     anchor = ref["anchored_seconds"] / ref["ratio_to_ref"]
     assert one["anchored_seconds"] == pytest.approx(one["ratio_to_ref"] * anchor)
     assert one["anchored_ns_per_ray"] == pytest.approx(one["anchored_seconds"] / 3000 * 1e9)
-    more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
     assert more[0]["anchored_seconds"] == pytest.approx(more[0]["ratio_to_ref"] * anchor)
 
 
