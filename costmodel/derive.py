@@ -27,7 +27,7 @@ m, M, m1, m2, m3, M1, M2 = sp.symbols("m M m1 m2 m3 M1 M2", positive=True)
 k1, k2 = sp.symbols("k1 k2", positive=True)
 L = sp.Symbol("L", positive=True, integer=True)
 
-#: Sec 2.2: "T_intersection/T_step is on average 4" (the same number as tracer.constants.IZE_TI_OVER_TS).
+#: Sec 2.2: "T_intersection/T_step is on average 4" (the same number as tracer.accel.constants.IZE_TI_OVER_TS).
 PAPER_TI_OVER_TS = sp.Integer(4)
 #: Table 2 "theoretical M" (= 8N) and Table 3 (= 8 N^1.5), N -> M as printed in the paper.
 PAPER_TABLE2 = {948: 7584, 69451: 555608, 15536: 124288, 1087716: 8701728, 282664: 2261312}

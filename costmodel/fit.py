@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar, nnls
 
 from costmodel.derive import long_skinny_time, one_level_time
-from tracer.constants import IZE_TI_OVER_TS
+from tracer.accel.constants import IZE_TI_OVER_TS
 
 N_BOOT = 400
 

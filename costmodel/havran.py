@@ -6,7 +6,7 @@ import numpy as np
 
 
 def cell_counts(grid) -> np.ndarray:
-    """Per-cell reference counts N_i of a built :class:`tracer.grid.UniformGrid` (or the counts)."""
+    """Per-cell reference counts N_i of a built :class:`tracer.accel.grid.UniformGrid` (or the counts)."""
     if hasattr(grid, "cell_start_"):
         return np.diff(np.asarray(grid.cell_start_, np.int64))
     return np.asarray(grid, np.int64).ravel()

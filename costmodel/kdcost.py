@@ -19,7 +19,7 @@ import numpy as np
 from scipy.optimize import nnls
 
 from costmodel.fit import _metrics
-from tracer.timing import MIN_SAMPLE_SECONDS
+from tracer.measure.timing import MIN_SAMPLE_SECONDS
 
 #: build settings measured by default: trees of different shapes (depth, clipping) so the node,
 #: leaf and test counts vary independently enough to separate their costs
@@ -77,13 +77,13 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
                       min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
     """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
     per-ray means of the counters and the median seconds per ray of the non-counting kernel
-    (:func:`tracer.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` as
-    :func:`tracer.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
+    (:func:`tracer.measure.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` as
+    :func:`tracer.measure.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
     ``scenes`` are Scene objects or registry names. Run it single-threaded."""
     from tracer.accel import build
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
-    from tracer.timing import time_call
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
+    from tracer.measure.timing import time_call
     out = []
     for sc in scenes:
         scene = load_scene(sc) if isinstance(sc, str) else sc
@@ -159,7 +159,7 @@ class BvhSahFit:
                                 + "; ".join(f"{k} rays: c_node {cn:.3g}, c_test {ct:.3g} ns" for k, (cn, ct) in self.free_.items())
                                 + "); calibrate on more or larger meshes, or on a quieter machine")
         if self.fallback_:
-            from tracer.bvh import BVH_TRAV_COST
+            from tracer.accel.bvh import BVH_TRAV_COST
             self.trav_cost_ = float(BVH_TRAV_COST if self.default is None else self.default)
         else:
             self.trav_cost_ = float(np.exp(np.mean(np.log(list(self.ratios_.values())))))

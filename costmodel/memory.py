@@ -15,7 +15,7 @@ K = sum_S Delta_l C_l / beta, and sympy finds the optimum M in closed form
 past B (Lambda, K -> 0) both tend to the paper's Eq 4 and Eq 8 — checked symbolically.
 
 The practical model (:class:`MemoryCostFit`) replaces the capacity formula by the latency curve
-the host's pointer-chasing probe measured (:class:`tracer.machine.MachineModel`), and Ize's ideal
+the host's pointer-chasing probe measured (:class:`tracer.measure.machine.MachineModel`), and Ize's ideal
 counts by the tracer's counters:
 
     T_ray = Tsetup + Ts0 * steps + Ti * tests
@@ -121,7 +121,7 @@ def working_sets(cells, memory_bytes) -> tuple[np.ndarray, np.ndarray]:
 
 def memory_feature(machine, steps, occupied, cells, memory_bytes) -> np.ndarray:
     """steps * x(B_cells) + occupied * x(B_data) (ns): the loads of a ray priced at the latency their
-    working set has over an L1 hit (:meth:`tracer.machine.MachineModel.extra_ns`)."""
+    working set has over an L1 hit (:meth:`tracer.measure.machine.MachineModel.extra_ns`)."""
     bc, bd = working_sets(cells, memory_bytes)
     return np.asarray(steps, float) * machine.extra_ns(bc) + np.asarray(occupied, float) * machine.extra_ns(bd)
 

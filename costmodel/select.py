@@ -22,7 +22,7 @@ import pandas as pd
 # Havran statistics (Hapala Eq 1-6) live in costmodel/havran.py; re-exported for the selector's users
 from costmodel.havran import (cell_counts, havran_stats, kurtosis_refs, max_refs, mean_refs,  # noqa: F401
                               sigma_refs, skewness_refs, sparseness_cells, sparseness_eq1, variance_refs)
-from tracer.constants import HAPALA_EPS
+from tracer.accel.constants import HAPALA_EPS
 
 #: grid resolution of the calibration and the decision (Hapala Sec 3: "number of cells proportional
 #: to N"; the constant is not given, we use cells = N, the classic choice of Cleary & Wyvill / Havran)
@@ -69,7 +69,7 @@ def time_stats(runs) -> dict:
 @contextmanager
 def single_thread():
     """Run the Numba kernels on the calling thread only: the times here are then the calling thread's
-    CPU time (:func:`tracer.timing.default_clock`, when its check trusts it), which a shared machine
+    CPU time (:func:`tracer.measure.timing.default_clock`, when its check trusts it), which a shared machine
     does not inflate the way it does wall time."""
     import numba
     n = numba.get_num_threads()
@@ -82,8 +82,8 @@ def single_thread():
 
 def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
     """Per-ray time {median, min over parts} of tracing ``o, d`` once with ``accel``
-    (:func:`tracer.timing.time_single_pass`: the way an application traces its first rays)."""
-    from tracer.timing import time_single_pass
+    (:func:`tracer.measure.timing.time_single_pass`: the way an application traces its first rays)."""
+    from tracer.measure.timing import time_single_pass
     return time_stats(time_single_pass(lambda po, pd_: accel.intersect(po, pd_, counters=False), o, d, chunks, warm))
 
 
@@ -452,12 +452,12 @@ class Selector:
     def probe(self, scene, rays=None) -> tuple[object, dict]:
         """Steps 1-2: build the grid (timed) and sample its per-ray time; returns (grid, features)."""
         from tracer.accel import build
-        from tracer.rays import make_rays
-        from tracer.scene import Scene
+        from tracer.scenes.rays import make_rays
+        from tracer.scenes.scene import Scene
         build(Scene(scene.tris[:1], "warm-up"), "grid")  # load the compiled kernels outside the timing
-        from tracer.timing import build_clock
+        from tracer.measure.timing import build_clock
         with single_thread():
-            t0 = build_clock()  # builds on wall time (see tracer.timing.build_clock)
+            t0 = build_clock()  # builds on wall time (see tracer.measure.timing.build_clock)
             grid = build(scene, "grid", factor=self.grid_factor)
             t_build = build_clock() - t0
         if rays is None:

@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     ctx = None
     try:
         if args.threads:
-            from tracer.timing import set_threads
+            from tracer.measure.timing import set_threads
             set_threads(args.threads)
         from experiments.core.context import RunContext
         ctx = RunContext.from_args(args)

@@ -21,7 +21,7 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 if not os.environ.get("GRIDCOST_NUMBA_CACHE"):
-    from tracer.provenance import numba_cache_dir
+    from tracer.measure.provenance import numba_cache_dir
     os.environ["GRIDCOST_NUMBA_CACHE"] = str(numba_cache_dir().parent)
 
 #: the small scenes the structure tests run on (each loads/builds in well under a second)
@@ -61,7 +61,7 @@ _SCENES: dict = {}
 @pytest.fixture(scope="session")
 def load(gridcost_cache):
     """``load(name)``: a named scene, loaded once per session (after the cache is redirected)."""
-    from tracer.scene import load_scene
+    from tracer.scenes.scene import load_scene
 
     def _load(name: str):
         if name not in _SCENES:
@@ -174,9 +174,9 @@ def cli_error():
 
 # ---------------------------------------------------------------- exact oracle agreement, far meshes
 def assert_agrees_exactly(hits, ref, ties, what=None) -> dict:
-    """The oracle contract for a structure that calls :func:`tracer.geometry.ray_triangle` as the
+    """The oracle contract for a structure that calls :func:`tracer.accel.geometry.ray_triangle` as the
     oracle does (ray widened to float64 with ``np.float64``, float32 vertices, float64 tmin/tmax):
-    no disagreement by :func:`tracer.oracle.compare` (hit/miss, id, t), and where the structure
+    no disagreement by :func:`tracer.accel.oracle.compare` (hit/miss, id, t), and where the structure
     returns the oracle's triangle its t is *bit-identical*: the structure's float32 t is the
     oracle's float64 t rounded, with no tolerance — the same function on the same inputs.
 
@@ -187,7 +187,7 @@ def assert_agrees_exactly(hits, ref, ties, what=None) -> dict:
     that case. Returns ``compare``'s counts."""
     import numpy as np
 
-    from tracer.oracle import compare
+    from tracer.accel.oracle import compare
 
     res = compare(hits, ref, ties)
     assert res["disagreements"] == 0, (what, res)
@@ -218,7 +218,7 @@ def transformed_scene(scene, scale: float = 1.0, shift: float = 0.0):
     1/128 apart and float32 rays often lie exactly in the planes of the mesh's vertices."""
     import numpy as np
 
-    from tracer.scene import Scene
+    from tracer.scenes.scene import Scene
 
     v = scene.tris.astype(np.float64)
     lo = v.reshape(-1, 3).min(axis=0)

@@ -27,7 +27,7 @@ def _cal(T):
 
 
 def test_probe_pool_is_the_full_frame_in_consecutive_pieces(load):
-    from tracer.rays import make_rays
+    from tracer.scenes.rays import make_rays
     scene = load("bunny-948")
     full = make_rays(scene, "camera", advise.CHECK_RAYS, seed=0)
     pool = advise.probe_pool(scene, "camera", 0)
@@ -60,7 +60,7 @@ def test_time_structures_traces_the_next_set_at_each_call(load, monkeypatch):
     scene = load("bunny-948")
     pool = advise.probe_pool(scene, "random", 0)[:3]
     seen = []
-    from tracer.grid import UniformGrid
+    from tracer.accel.grid import UniformGrid
     orig = UniformGrid.intersect
 
     def spy(self, o, d, counters=True):

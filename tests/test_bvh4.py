@@ -1,4 +1,4 @@
-"""Tests of the 4-wide BVH (tracer.bvh4, float32 slab tests of four children per node) and of the
+"""Tests of the 4-wide BVH (tracer.accel.bvh4, float32 slab tests of four children per node) and of the
 binary BVH's sign-ordered traversal (``order="sign"``): closest hits identical to the float64
 brute-force oracle on all four ray kinds, also on a mesh far from the origin and on rays lying in
 the planes of the node boxes; any-hit queries; the collapse keeps every binary leaf once."""
@@ -11,9 +11,9 @@ import pytest
 from conftest import assert_agrees_exactly, transformed_scene
 
 from tracer import build
-from tracer.oracle import oracle_intersect
-from tracer.rays import KINDS, make_rays
-from tracer.scene import Scene, load_scene
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import KINDS, make_rays
+from tracer.scenes.scene import Scene, load_scene
 
 #: (structure, params) of the variants under test
 VARIANTS = {"bvh4": ("bvh4", {}), "bvh-sign": ("bvh", {"order": "sign"}),

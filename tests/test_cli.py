@@ -7,7 +7,7 @@ import numpy as np
 
 import pytest
 
-from tracer.reference import EmbreeAccel
+from tracer.accel.reference import EmbreeAccel
 
 
 def _json(proc) -> dict:

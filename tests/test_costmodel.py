@@ -6,7 +6,7 @@ import pytest
 from costmodel.fit import (CounterCostFit, ExponentFit, GridCostFit, refine_minimum, select_model,
                            work_cost)
 from tracer import build, load_scene
-from tracer.rays import make_rays
+from tracer.scenes.rays import make_rays
 
 
 def _synthetic(form, N=10_000, tsetup=50.0, ts=3.0, ti=12.0, noise=0.01, seed=0):

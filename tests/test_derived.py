@@ -1,12 +1,12 @@
-"""Scenes derived by name (tracer.derived): subdivided, in a stadium, arrays of copies."""
+"""Scenes derived by name (tracer.scenes.derived): subdivided, in a stadium, arrays of copies."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tracer import derived
+from tracer.scenes import derived
 from tracer.errors import GridcostError
-from tracer.scene import load_scene
+from tracer.scenes.scene import load_scene
 
 
 def _area(t):

@@ -12,7 +12,7 @@ import pytest
 
 from experiments.core.context import RunContext
 from experiments.core.store import PointStore, atomic_write
-from tracer.scene import load_scene
+from tracer.scenes.scene import load_scene
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -96,7 +96,7 @@ def test_dask_two_process_cluster_equals_local(tmp_path, monkeypatch):
     from experiments.core.context import RunContext
     from experiments.core.executor import DaskExecutor, LocalExecutor
     from experiments.core.sweep import sweep
-    from tracer.rays import make_rays
+    from tracer.scenes.rays import make_rays
     monkeypatch.setenv("GRIDCOST_CLOCK", "wall")  # what DaskExecutor sets: the clock of a Dask run
     scene = load_scene("bunny-948")
     rays = {"random": make_rays(scene, "random", 2000, seed=0), "camera": make_rays(scene, "camera", 1500, seed=1)}
@@ -177,9 +177,9 @@ def test_memprobe_hollow_rays_and_costs():
     """Hollow rays cross only empty cells (the probe asserts it), and the probed costs are real
     positive times with a triangle test dearer than an empty step."""
     from experiments.ize import memprobe
-    from tracer.oracle import oracle_intersect
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
+    from tracer.accel.oracle import oracle_intersect
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
     for name in ("capped-cylinder-196", "cylinder-196"):
         scene = load_scene(name)
         o, d, tmax = memprobe.hollow_rays(scene, 500, seed=1)
@@ -199,8 +199,8 @@ def test_paired_timing_of_points_and_planes(tmp_path):
     """Side-by-side timing: penalties are relative to the fastest point (>= 0 up to round noise, a
     clearly worse grid costs more), results are stored and a rerun returns them unchanged."""
     from experiments.core.sweep import paired_penalties, paired_plane
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
     scene = load_scene("bunny-948")
     rays = make_rays(scene, "random", 3000, seed=0)
     store = PointStore(tmp_path)
@@ -219,8 +219,8 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     """Every sweep point is timed beside the scene's 8N grid: the reference configuration itself
     comes out at a ratio of ~1, times are ratio x one stored anchor, and a later sweep of the same
     scene (refinement points) reuses that anchor."""
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
     scene = load_scene("bunny-948")
     rays = {"random": make_rays(scene, "random", 3000, seed=0)}
     store = RunContext(out=tmp_path).store()
@@ -233,7 +233,7 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     # does not inflate (with both threads and wall time it moved the one-cell grid's ratio to 7.8)
     import numba
     from experiments.core.sweep import REFERENCE, sweep
-    from tracer.timing import set_threads
+    from tracer.measure.timing import set_threads
     threads = numba.get_num_threads()
     set_threads(1)
     try:
@@ -254,8 +254,8 @@ def test_point_hits_is_the_fraction_of_all_rays():
     """A sweep row's ``hits`` counts every ray: rays whose first 2,000 all miss (the sample the
     column once took) and whose rest all hit read 0.5, checked against the oracle."""
     from experiments.core.point import measure
-    from tracer.oracle import oracle_intersect
-    from tracer.rays import Rays
+    from tracer.accel.oracle import oracle_intersect
+    from tracer.scenes.rays import Rays
     scene = load_scene("bunny-948")
     lo, hi = scene.bounds.astype(float)
     c = (np.asarray(lo, float) + np.asarray(hi, float)) / 2
@@ -275,7 +275,7 @@ def test_paired_rounds_are_added_until_the_penalty_is_known():
     penalties asks while a target's 95 % interval is wider than ±half-width; the interval of a median
     is the binomial order statistics."""
     from experiments.core.sweep import _unsettled, penalty_ci
-    from tracer.timing import median_ci, time_paired
+    from tracer.measure.timing import median_ci, time_paired
     x = np.arange(11.0)
     assert median_ci(x) == (1.0, 9.0)  # P(B <= 1) = 12/2048 each side: 98.8 % coverage
     assert median_ci(np.arange(41.0)) == (13.0, 27.0)

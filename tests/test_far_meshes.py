@@ -6,7 +6,7 @@ the kd-tree once lost nearer hits there (a ray in a split plane pushed the far c
 entries that start later, and the traversal stopped at the first entry beyond the closest hit).
 Meshes scaled by 1e-4 and 1e4 catch absolute epsilons; 1e-3 at 1e3 is both small and far.
 
-Every structure here calls :func:`tracer.geometry.ray_triangle` exactly as the oracle does, so a
+Every structure here calls :func:`tracer.accel.geometry.ray_triangle` exactly as the oracle does, so a
 hit on the oracle's triangle has a bit-identical t (:func:`conftest.assert_agrees_exactly`).
 """
 from __future__ import annotations
@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from tracer.accel import STRUCTURES, build
-from tracer.geometry import PARALLEL_COS
-from tracer.oracle import oracle_intersect
-from tracer.rays import make_rays
-from tracer.scene import Scene
+from tracer.accel.geometry import PARALLEL_COS
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import make_rays
+from tracer.scenes.scene import Scene
 
 #: name -> (scale, shift) applied to the mesh normalised to unit size
 PLACEMENTS = {"far-1e5": (1.0, 1e5), "tiny-1e-4": (1e-4, 0.0), "huge-1e4": (1e4, 0.0),

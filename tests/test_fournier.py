@@ -9,9 +9,9 @@ import pandas as pd
 
 from experiments.fournier import around, scenes
 from experiments.fournier.table1 import PAPER_TABLE1, TEAPOT, measure_scene, object_ids
-from tracer.oracle import oracle_intersect
-from tracer.sortedlists import SortedLists, padded_boxes
-from tracer.spd import spd_camera_rays, spd_scene
+from tracer.accel.oracle import oracle_intersect
+from tracer.accel.sortedlists import SortedLists, padded_boxes
+from tracer.scenes.spd import spd_camera_rays, spd_scene
 
 ARGS = argparse.Namespace(nogrid_max=5000, leaf_size=8, branching=2)
 
@@ -66,7 +66,7 @@ def test_secondary_rays_agree_with_the_oracle():
     so, sd, tm = sec["shadow"]
     ro, rd, _ = sec["reflection"]
     assert len(so) == len(ro) == nh and np.allclose(np.linalg.norm(rd, axis=1), 1, atol=1e-5)
-    from tracer.grid import UniformGrid
+    from tracer.accel.grid import UniformGrid
     for acc in (UniformGrid(res=(30, 30, 30)).build(scene), SortedLists().build(scene)):
         occ_ref, _ = oracle_intersect(scene, so, sd, tmax=tm)
         assert np.array_equal(acc.occluded(so, sd, tm), occ_ref.tri_id >= 0)

@@ -1,5 +1,5 @@
-"""Uniform grid (tracer.grid) against the float64 oracle, its counters and resolution rules, the memory
-guard, and the geometry kernels (tracer.geometry) it is built on."""
+"""Uniform grid (tracer.accel.grid) against the float64 oracle, its counters and resolution rules, the memory
+guard, and the geometry kernels (tracer.accel.geometry) it is built on."""
 from __future__ import annotations
 
 import itertools
@@ -10,11 +10,11 @@ from conftest import assert_agrees_exactly
 
 from tracer.accel import COUNTER_NAMES, Hits, build
 from tracer.errors import GridcostError
-from tracer.geometry import ray_box, ray_triangle, tri_box_overlap
-from tracer.grid import UniformGrid, res_from_cells, res_pbrt, res_wald
-from tracer.oracle import compare, oracle_intersect
-from tracer.rays import KINDS, make_rays
-from tracer.scene import Scene
+from tracer.accel.geometry import ray_box, ray_triangle, tri_box_overlap
+from tracer.accel.grid import UniformGrid, res_from_cells, res_pbrt, res_wald
+from tracer.accel.oracle import compare, oracle_intersect
+from tracer.scenes.rays import KINDS, make_rays
+from tracer.scenes.scene import Scene
 
 N_RAYS = 2000
 VARIANTS = {"exact": dict(exact=True, mailbox=False), "exact-mailbox": dict(exact=True, mailbox=True),
@@ -101,7 +101,8 @@ def test_macrocell_grid_agrees_with_oracle(small_scene, kind, macro, factor):
         assert none is None
         np.testing.assert_array_equal(fast.tri_id, hits.tri_id)
         np.testing.assert_array_equal(fast.t, hits.t)
-        jumps += int(counters.total()["nodes"])  # counter "nodes" = macrocell jumps
+        jumps += int(counters.total()["jumps"])
+        assert counters.total()["nodes"] == 0  # no column holds another meaning
         # any hit: occluded just past the closest hit, never on a miss
         hit = ref.tri_id >= 0
         tmax = np.where(hit, ref.t * (1 + 1e-5) + 1e-12, np.inf).astype(np.float32)
@@ -560,8 +561,8 @@ def test_grid_axis_aligned_rays_on_cell_planes(bunny):
 def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
     """"auto" reads vertices through the triangle id when the triangles fit in L2 and their
     cell-order copy would not (long skinny triangles), and keeps the copy otherwise."""
-    from tracer.grid import choose_layout
-    from tracer.scene import load_scene
+    from tracer.accel.grid import choose_layout
+    from tracer.scenes.scene import load_scene
     monkeypatch.setenv("GRIDCOST_L2", "1M")
     assert choose_layout("auto", 3996, 214_196) == "index"  # 144 KiB of triangles, 7.4 MiB copied
     assert choose_layout("auto", 948, 8_000) == "copy"  # the copy fits in L2 as well
@@ -587,7 +588,7 @@ def test_unknown_layout_is_refused():
 
 
 def test_cache_sizes_from_sysfs_or_environment(monkeypatch):
-    from tracer.memory import cache_bytes
+    from tracer.measure.memory import cache_bytes
     monkeypatch.delenv("GRIDCOST_L2", raising=False)
     l1, l2, l3 = cache_bytes(1), cache_bytes(2), cache_bytes(3)
     assert 0 < l1 < l2 <= l3  # a real hierarchy (sysfs) or the defaults (1 MiB, 32 MiB)

@@ -36,8 +36,8 @@ def test_stand_ins_are_in_the_full_run_and_match_the_papers_n():
     assert all(s in full for s in STAND_INS)
     big = [s for s, (p, _) in STAND_INS.items() if paper[p][1] > 1_000_000]
     assert len(big) >= 4
-    from tracer.derived import ARRAY
-    from tracer.scene import load_scene
+    from tracer.scenes.derived import ARRAY
+    from tracer.scenes.scene import load_scene
     for name, (p, _) in STAND_INS.items():
         m = ARRAY.match(name)
         n = int(m["k"]) * load_scene(m["base"]).n  # the array's N without building it
@@ -47,7 +47,7 @@ def test_stand_ins_are_in_the_full_run_and_match_the_papers_n():
 def test_a_stand_in_has_the_papers_sigma():
     from costmodel.havran import havran_stats
     from tracer.accel import build
-    from tracer.scene import load_scene
+    from tracer.scenes.scene import load_scene
     name = "array-8-99-teapot"
     scene = load_scene(name)
     sigma = havran_stats(build(scene, "grid", factor=1.0))["sigma"]

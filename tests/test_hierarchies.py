@@ -1,4 +1,4 @@
-"""Tests of the hierarchies (tracer.kdtree: pbrt-v2 SAH kd-tree; tracer.bvh: binned-SAH BVH):
+"""Tests of the hierarchies (tracer.accel.kdtree: pbrt-v2 SAH kd-tree; tracer.accel.bvh: binned-SAH BVH):
 closest hits identical to the float64 brute-force oracle on every ray kind, any-hit queries,
 counters, the counting/non-counting variants, and small or empty cases."""
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from conftest import assert_agrees_exactly, transformed_scene
 
 from tracer import build
-from tracer.oracle import oracle_intersect
-from tracer.rays import KINDS, make_rays
-from tracer.scene import Scene, load_scene
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import KINDS, make_rays
+from tracer.scenes.scene import Scene, load_scene
 
 STRUCTURES = ("kdtree", "bvh")
 SCENES = ("bunny-948", "cornell", "cylinder-196", "particles-2000")
@@ -219,7 +219,7 @@ def test_empty_scene():
 
 
 def _kd_splits(a):
-    """(axis, split) of every interior node of a built kd-tree (see tracer.kdtree's layout)."""
+    """(axis, split) of every interior node of a built kd-tree (see tracer.accel.kdtree's layout)."""
     w = a.nodes_[:, 0]
     inner = (w & 3) != 3
     return (w[inner] & 3).astype(np.int64), a.nodes_f_[inner, 1]

@@ -1,4 +1,4 @@
-"""The perfect-split kd-tree build on clipped triangles (tracer.kdtree_clip) and the fitted SAH
+"""The perfect-split kd-tree build on clipped triangles (tracer.accel.kdtree_clip) and the fitted SAH
 constants (costmodel.kdcost): closest hits identical to the float64 oracle on every ray kind (also
 far from the origin, where float32 rays lie in split planes), the clipping itself, and the fit on
 known constants. Small scenes and few rays: the cost is mostly the one compilation of the build."""
@@ -13,9 +13,9 @@ from conftest import assert_agrees_exactly, transformed_scene
 from costmodel.kdcost import BvhSahFit, KdCostFit, fit_bvh_trav_cost, fit_sah_constants, kd_time_per_ray
 from tracer import build
 from tracer.errors import GridcostError
-from tracer.oracle import oracle_intersect
-from tracer.rays import KINDS, make_rays
-from tracer.scene import Scene, load_scene
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import KINDS, make_rays
+from tracer.scenes.scene import Scene, load_scene
 
 SCENES = ("bunny-948", "cornell", "particles-2000")
 #: the clip build with pbrt's constants, and with a small isect:trav (as fitted) and a deeper budget
@@ -94,7 +94,7 @@ def test_clipping_tightens_references_and_tree():
 
 
 def test_clip_bounds_of_a_triangle():
-    from tracer.kdtree_clip import _clip_bounds
+    from tracer.accel.kdtree_clip import _clip_bounds
     tv = np.array([[0, 0, 0, 1, 0, 0, 0, 1, 0]], np.float32)
     poly, out = np.empty((2, 10, 3)), np.empty(6)
     assert _clip_bounds(tv, 0, np.array([0.5, 0, -1, 1, 1, 1.0]), poly, out)

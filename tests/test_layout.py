@@ -173,7 +173,7 @@ def test_every_module_imports_in_a_fresh_interpreter():
 # ---------------------------------------------------------------- (b) dependencies point one way
 def test_the_import_reader_sees_function_level_imports():
     """The checks below read imports inside functions too (the graph has a known one)."""
-    assert "tracer.procedural" in import_graph()["tracer.registry"]
+    assert "tracer.scenes.procedural" in import_graph()["tracer.scenes.registry"]
     assert any(_under(m, "tracer") for m in import_graph()["experiments.tools.verify"])
 
 

@@ -5,9 +5,9 @@ import pytest
 
 from costmodel import memory as mm
 from tracer.accel import build
-from tracer.machine import MachineModel, chase_ns
-from tracer.rays import make_rays
-from tracer.scene import load_scene
+from tracer.measure.machine import MachineModel, chase_ns
+from tracer.scenes.rays import make_rays
+from tracer.scenes.scene import load_scene
 
 
 def test_one_level_optimum_closed_form_and_paper_limit():

@@ -1,4 +1,4 @@
-"""Tests of tracer.nested (two-level and d-level grids, Ize, Shirley & Parker 2007 Sec. 4):
+"""Tests of tracer.accel.nested (two-level and d-level grids, Ize, Shirley & Parker 2007 Sec. 4):
 oracle agreement for closest and any hit, counters, per-level counts, cell counts, memory guard."""
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ from conftest import assert_agrees_exactly
 
 from tracer.accel import build
 from tracer.errors import GridcostError
-from tracer.grid import UniformGrid, res_from_cells
-from tracer.nested import NestedGrid, res_many
-from tracer.oracle import oracle_intersect
-from tracer.rays import KINDS, adversarial_rays, make_rays
-from tracer.scene import load_scene
+from tracer.accel.grid import UniformGrid, res_from_cells
+from tracer.accel.nested import NestedGrid, res_many
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import KINDS, adversarial_rays, make_rays
+from tracer.scenes.scene import load_scene
 
 SCENES = ("bunny-948", "cornell", "cylinder-196", "particles-2000", "dragon-11k")
 NRAYS = 5000

@@ -1,4 +1,4 @@
-"""Coherent grid traversal (tracer.packet) against the float64 oracle, its work counters, and the
+"""Coherent grid traversal (tracer.accel.packet) against the float64 oracle, its work counters, and the
 packet cost model (costmodel.packet). Kept to two compiled kernel variants (counting / not, with
 macrocells) so a cold run stays well under a minute."""
 from __future__ import annotations
@@ -9,10 +9,10 @@ import pytest
 from costmodel.packet import COLUMNS, PacketCostFit, best_config
 from tracer.accel import COUNTER_NAMES, build
 from tracer.errors import GridcostError
-from tracer.grid import UniformGrid
-from tracer.oracle import compare, oracle_intersect
-from tracer.packet import PACKET_COUNTERS, CoherentGrid
-from tracer.rays import camera_rays, make_rays
+from tracer.accel.grid import UniformGrid
+from tracer.accel.oracle import compare, oracle_intersect
+from tracer.accel.packet import PACKET_COUNTERS, CoherentGrid
+from tracer.scenes.rays import camera_rays, make_rays
 
 PACKETS = (1, 2, 4, 8, 16)
 VIEWS = ((0.55, 0.45, 0.7), (1.0, 0.0, 0.0), (-0.3, 0.2, -1.0))  # oblique, axis-aligned, from below

@@ -6,7 +6,7 @@ import pytest
 
 from costmodel import memory as mm
 from experiments.ize import predict
-from tracer.machine import MachineModel
+from tracer.measure.machine import MachineModel
 
 
 def _machine():

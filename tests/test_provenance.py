@@ -22,12 +22,12 @@ from tracer.errors import GridcostError
 REPO = Path(__file__).resolve().parents[1]
 
 
-# ---------------------------------------------------------------- Numba cache keyed by the whole tracer
+# ---------------------------------------------------------------- Numba cache keyed by the kernel sources
 _PROBE = """
 import sys
 import numpy as np
-from tracer.geometry import ray_triangle
-from tracer._jit import jit, CACHE_DIR
+from tracer.accel.geometry import ray_triangle
+from tracer.accel._jit import jit, CACHE_DIR
 
 @jit
 def caller():
@@ -38,7 +38,7 @@ print(caller(), CACHE_DIR)
 
 
 def test_cross_file_edit_reaches_cached_kernel(tmp_path):
-    """A kernel in one file inlines ray_triangle from tracer/geometry.py. After an edit to
+    """A kernel in one file inlines ray_triangle from tracer/accel/geometry.py. After an edit to
     geometry.py only, a fresh process must run the edited code, not the cached machine code."""
     pkg = tmp_path / "repo"
     shutil.copytree(REPO / "tracer", pkg / "tracer", ignore=shutil.ignore_patterns("__pycache__", "data"))
@@ -57,7 +57,7 @@ def test_cross_file_edit_reaches_cached_kernel(tmp_path):
     t1b, cache1b = run()  # second run: served from the cache
     assert (t1b, cache1b) == (t1, cache1)
     assert any(Path(cache1).rglob("*.nbi")), "the kernel was not cached"
-    geo = pkg / "tracer" / "geometry.py"
+    geo = pkg / "tracer" / "accel" / "geometry.py"
     src = geo.read_text()
     # an edit in geometry.py only: the triangle test now returns t + 1
     edited = src.replace("def ray_triangle(", "def _ray_triangle_orig(", 1)
@@ -68,6 +68,48 @@ def test_cross_file_edit_reaches_cached_kernel(tmp_path):
     t2, cache2 = run()
     assert cache2 != cache1
     assert t2 == pytest.approx(2.0), "a cached kernel kept running the old geometry.py"
+
+
+_KEYS = """
+from tracer.measure.provenance import measurement_key, numba_cache_dir
+print(numba_cache_dir().name, measurement_key(("experiments/core/sweep.py",), 1, "thread CPU time")["code"])
+"""
+
+
+def test_registry_edit_keeps_cache_and_points_kernel_edit_drops_both(tmp_path):
+    """The Numba cache folder and the measurement key hash the kernel sources only: an edit to the
+    registry's table, to a scene loader or to a kernel's docstring keeps both; an edit to the code
+    of ``ray_triangle`` changes both."""
+    pkg = tmp_path / "repo"
+    shutil.copytree(REPO / "tracer", pkg / "tracer", ignore=shutil.ignore_patterns("__pycache__", "data"))
+    shutil.copytree(REPO / "experiments" / "core", pkg / "experiments" / "core",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    (pkg / "keys.py").write_text(_KEYS)
+    env = dict(os.environ, PYTHONPATH=str(pkg), GRIDCOST_NUMBA_CACHE=str(tmp_path / "numba"))
+
+    def keys():
+        p = subprocess.run([sys.executable, "keys.py"], cwd=pkg, env=env, capture_output=True, text=True,
+                           timeout=120)
+        assert p.returncode == 0, p.stderr
+        return tuple(p.stdout.split())
+
+    base = keys()
+    assert len(base) == 2 and all(len(k) == 16 for k in base)
+    reg = pkg / "tracer" / "scenes" / "registry_data.py"
+    reg.write_text(reg.read_text() + "\nEXTRA_MESH_NOTE = 'a new registry entry'\n")
+    scene = pkg / "tracer" / "scenes" / "scene.py"
+    scene.write_text(scene.read_text() + "\n\ndef _new_loader():\n    return None\n")
+    geo = pkg / "tracer" / "accel" / "geometry.py"
+    src = geo.read_text()
+    j = src.index('"""', src.index("def ray_triangle(")) + 3
+    geo.write_text(src[:j] + "A reworded docstring. " + src[j:])  # docstring only
+    assert keys() == base
+    code_edit = geo.read_text()
+    i = code_edit.index("def ray_triangle(")
+    k = code_edit.index('"""', code_edit.index('"""', i) + 3) + 3
+    geo.write_text(code_edit[:k] + "\n    tmax = tmax * 1.0" + code_edit[k:])  # code: one more operation
+    edited = keys()
+    assert edited[0] != base[0] and edited[1] != base[1]
 
 
 # ---------------------------------------------------------------- stored points and their key
@@ -85,7 +127,7 @@ def test_point_with_another_key_is_remeasured(tmp_path, monkeypatch):
     assert rec["key"]["code"] and rec["key"]["threads"] >= 1 and rec["key"]["clock"] and rec["key"]["cpu"]
     assert rec["provenance"]["commit"] and rec["provenance"]["host"]
     # another thread count (or code, clock, CPU): the stored point is stale and measured again
-    from tracer import provenance
+    from tracer.measure import provenance
     real = provenance.measurement_key
     monkeypatch.setattr(provenance, "measurement_key", lambda code, threads, clock:
                         dict(real(code, threads, clock), threads=99))
@@ -138,7 +180,7 @@ def test_results_csv_keeps_commits_text(tmp_path, commit):
 
 # ---------------------------------------------------------------- clocks
 def test_clock_check_sees_kernel_work():
-    from tracer.timing import thread_clock_check
+    from tracer.measure.timing import thread_clock_check
     chk = thread_clock_check()
     assert chk["ok"], chk
     assert chk["thread"] > 0.5 * chk["wall"] > 0
@@ -147,7 +189,7 @@ def test_clock_check_sees_kernel_work():
 def test_untrustworthy_thread_clock_falls_back_to_wall(monkeypatch, capsys):
     import numba
 
-    from tracer import timing
+    from tracer.measure import timing
     timing.thread_clock_check.cache_clear()
     monkeypatch.setattr(timing.time, "thread_time", lambda: 1.0)  # a clock that sees no work
     n = numba.get_num_threads()
@@ -174,7 +216,7 @@ def _peak(fn):
 
 @pytest.mark.parametrize("params", [{"cells": 2e6}, {"cells": 2e6, "macro": 4}, {"cells": 2e6, "layout": "index"}])
 def test_grid_memory_estimate_matches_peak(params):
-    from tracer.grid import grid_build_bytes
+    from tracer.accel.grid import grid_build_bytes
     scene = load_scene("dragon-11k")
     build(scene, "grid", cells=1000)  # compile outside the measurement
     g, peak = _peak(lambda: build(scene, "grid", **params))
@@ -193,7 +235,7 @@ def test_nested_memory_estimate_matches_peak(params):
 
 def test_grid_near_the_budget(monkeypatch):
     """Just over the estimate builds; just under refuses with the estimate in the message."""
-    from tracer.grid import grid_build_bytes
+    from tracer.accel.grid import grid_build_bytes
     scene = load_scene("bunny-948")
     g = build(scene, "grid", cells=1e6)
     st = g.stats()
@@ -246,7 +288,7 @@ def test_all_refuses_dirty_tree_into_results(monkeypatch, capsys):
 
 def test_bench_threads_ratio_is_labelled_per_thread(tmp_path):
     from experiments.tools.bench import run_bench
-    from tracer.reference import EmbreeAccel
+    from tracer.accel.reference import EmbreeAccel
     if not EmbreeAccel.available():
         pytest.skip("embreex not installed (optional extra)")
     scene = load_scene("bunny-948")
@@ -283,10 +325,10 @@ def test_results_index_names_who_measured_each_folder(tmp_path):
 
 def test_timing_noise_is_measured_without_counting_as_a_timing():
     """The noise meter's reading: finite, non-negative CVs of both kernels, on the run's clock; it
-    must not move tracer.timing's count of timings (which tells a file measured now from one drawn
+    must not move tracer.measure.timing's count of timings (which tells a file measured now from one drawn
     from stored points)."""
     from experiments.core.noise import timing_noise, worst_cv
-    from tracer.timing import timing_calls
+    from tracer.measure.timing import timing_calls
     before = timing_calls()
     tn = timing_noise(samples=4, min_sample=0.002)
     assert timing_calls() == before

@@ -1,4 +1,4 @@
-"""The mesh registry (tracer.registry): the table against MANIFEST.tsv and the shipped files, the lookup
+"""The mesh registry (tracer.scenes.registry): the table against MANIFEST.tsv and the shipped files, the lookup
 order (--models/$GRIDCOST_MODELS, ../shared/models, tracer/data, the user cache, download), checksum
 errors, the missing-mesh error, stand-ins, downloads through pooch (file:// URLs, no network), the
 ``models`` target and the README's target table."""
@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tracer import registry
+from tracer.scenes import registry
 from tracer.errors import GridcostError
-from tracer.registry import MESHES, Source
-from tracer.scene import load_scene, manifest
+from tracer.scenes.registry import MESHES, Source
+from tracer.scenes.scene import load_scene, manifest
 
 REPO = Path(__file__).resolve().parents[1]
 VENDORED = registry.VENDORED_DIR
@@ -308,7 +308,7 @@ def test_readme_target_table_lists_every_target():
 def test_registry_has_no_import_side_effects():
     """Importing the registry reads no file and needs neither pooch nor platformdirs."""
     code = ("import sys; sys.modules['pooch'] = None; sys.modules['platformdirs'] = None\n"
-            "import tracer.registry as r; print(r.cache_root())")
+            "import tracer.scenes.registry as r; print(r.cache_root())")
     import subprocess
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=str(REPO), check=False)
     assert out.returncode == 0, out.stderr

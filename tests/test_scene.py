@@ -1,4 +1,4 @@
-"""Scene loading (tracer.scene, tracer.meshfile, tracer.procedural, tracer.spd): MANIFEST meshes,
+"""Scene loading (tracer.scenes.scene, tracer.scenes.meshfile, tracer.scenes.procedural, tracer.scenes.spd): MANIFEST meshes,
 named, procedural and SPD scenes, bounds, bad input (library and CLI), triangle strips, textures
 without Pillow, degenerate triangles, the parsed-mesh cache."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracer.errors import GridcostError
-from tracer.scene import Scene, cache_dir, load_mesh, load_scene, manifest
+from tracer.scenes.scene import Scene, cache_dir, load_mesh, load_scene, manifest
 
 MANIFEST = manifest()
 #: named meshes under 20k faces present on this machine (../shared/models, or those shipped in tracer/data)
@@ -121,8 +121,8 @@ def test_unknown_scene_name():
 def test_one_scene_registry_lists_and_loads_every_kind():
     """scene_names() lists registry meshes, procedural and SPD scenes, and load_scene loads each kind
     by name (an SPD scene is the generator's, the same triangles)."""
-    from tracer import procedural, registry, spd
-    from tracer.scene import scene_names
+    from tracer.scenes import procedural, registry, spd
+    from tracer.scenes.scene import scene_names
     names = scene_names()
     assert set(registry.MESHES) | set(procedural.names()) | set(spd.names()) <= set(names)
     assert len(names) == len(set(names))
@@ -135,9 +135,9 @@ def test_one_scene_registry_lists_and_loads_every_kind():
 
 
 def test_scene_type_has_no_loader_below_it():
-    """Scene lives in tracer.scenetype (imported by every loader and generator), re-exported by
-    tracer.scene; procedural scenes built around a named mesh get it from the caller."""
-    from tracer import procedural, scene, scenetype
+    """Scene lives in tracer.scenes.scenetype (imported by every loader and generator), re-exported by
+    tracer.scenes.scene; procedural scenes built around a named mesh get it from the caller."""
+    from tracer.scenes import procedural, scene, scenetype
     assert scene.Scene is scenetype.Scene and scene.scene_bounds is scenetype.scene_bounds
     with pytest.raises(GridcostError, match="loader"):
         procedural.make("teapot-in-stadium")
@@ -188,10 +188,10 @@ def test_teapot_in_stadium_camera_sees_the_teapot(models, monkeypatch):
     the sphere that stands in for it when the model is missing. The view survives pickling (Dask)."""
     import pickle
 
-    from tracer import scene as scene_mod
-    from tracer.grid import UniformGrid
-    from tracer.procedural import box, sphere
-    from tracer.rays import bounding_sphere, camera_frame, make_rays
+    from tracer.scenes import scene as scene_mod
+    from tracer.accel.grid import UniformGrid
+    from tracer.scenes.procedural import box, sphere
+    from tracer.scenes.rays import bounding_sphere, camera_frame, make_rays
     if models == "sphere-fallback":
         monkeypatch.setattr(scene_mod, "manifest", lambda models=None: {})
     elif "teapot" not in manifest():
@@ -385,7 +385,7 @@ def test_compressed_mesh_file(write_mesh, tmp_path):
 
 def test_decode_strips_unit():
     """The decoder itself (reachable once the loader passes strips to it)."""
-    from tracer.scene import _decode_strips
+    from tracer.scenes.scene import _decode_strips
     faces = _decode_strips([[0, 1, 2, 3, 3, 4, 4, 5, 6, 7, -1, 2, 3, 8, 9]])
     assert sorted(map(lambda f: tuple(sorted(f)), faces.tolist())) == sorted(STRIP_TRIS)
     assert faces.tolist()[1] == [2, 1, 3]  # odd strip triangle: winding flipped
@@ -429,7 +429,7 @@ def test_textured_obj_without_pillow(write_mesh, run_cli):
     code = (
         "import sys, json\n"
         "sys.modules['PIL'] = None\n"
-        "from tracer.scene import load_mesh, load_scene\n"
+        "from tracer.scenes.scene import load_mesh, load_scene\n"
         "a = load_mesh(sys.argv[1], use_cache=False)\n"
         "b = load_scene(sys.argv[2])\n"
         "print(json.dumps([a.n, b.n, 'PIL' in sys.modules and sys.modules['PIL'] is None]))\n"
@@ -473,7 +473,7 @@ def test_cache_second_load_identical_and_no_new_file(write_mesh, bunny, monkeypa
     after_first = set(cdir.glob("*"))
     assert len(after_first - before) == 1  # one new cache entry
     # the second load must come from the cache: parsing again would fail
-    import tracer.meshfile as meshfile
+    import tracer.scenes.meshfile as meshfile
 
     def no_parse(*a, **k):
         raise AssertionError("second load parsed the file again instead of using the cache")

@@ -131,8 +131,8 @@ def test_havran_statistics_hand_computed_counts():
 
 
 def test_havran_statistics_of_a_built_2x2x2_grid():
-    from tracer.grid import UniformGrid
-    from tracer.scene import Scene
+    from tracer.accel.grid import UniformGrid
+    from tracer.scenes.scene import Scene
 
     def tri(x, y, z, h=0.05):
         return [[x, y, z], [x + h, y, z], [x, y + h, z + h]]
@@ -156,7 +156,7 @@ def test_havran_statistics_of_a_built_2x2x2_grid():
 def spd_calibration():
     """A small real calibration (path rays) of three SPD-like scenes."""
     from experiments.hapala.table1 import calibrate_scene
-    from tracer.spd import spd_scene
+    from tracer.scenes.spd import spd_scene
     raw = [calibrate_scene(spd_scene(n), kinds=("path",), n_rays=2000, samples=(500,), repeats=2)
            for n in ("sphereflake-1", "tree-4", "tetra-4")]
     return records(raw)
@@ -185,9 +185,9 @@ def test_teapot_in_stadium_kdtree_wins_on_path_rays_not_on_random(load):
     ray tests thousands of triangles and a kd-tree ray a few dozen; random rays (whole bounding sphere)
     see the stadium walls, where the grid does the fewer tests."""
     from costmodel.select import GRID_FACTOR
-    from tracer.grid import UniformGrid
-    from tracer.kdtree import KdTree
-    from tracer.rays import make_rays
+    from tracer.accel.grid import UniformGrid
+    from tracer.accel.kdtree import KdTree
+    from tracer.scenes.rays import make_rays
     sc = load("teapot-in-stadium")
     grid = UniformGrid(factor=GRID_FACTOR).build(sc)
     kd = KdTree().build(sc)

@@ -1,11 +1,11 @@
-"""tracer.simd.slab4: the four-lane slab test equals the scalar float32 code lane by lane, bit for bit,
+"""tracer.accel.simd.slab4: the four-lane slab test equals the scalar float32 code lane by lane, bit for bit,
 including the NaN rule (origin on a slab plane with an infinite inverse direction)."""
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from tracer.simd import slab4
+from tracer.accel.simd import slab4
 
 
 @njit

@@ -1,17 +1,17 @@
-"""Sorted event lists (tracer.sortedlists, Fournier & Poulin 1993) against the float64 oracle, their
-counters, and the SPD-style scene generators (tracer.spd)."""
+"""Sorted event lists (tracer.accel.sortedlists, Fournier & Poulin 1993) against the float64 oracle, their
+counters, and the SPD-style scene generators (tracer.scenes.spd)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from conftest import assert_agrees_exactly
 
-from tracer import spd
+from tracer.scenes import spd
 from tracer.accel import COUNTER_NAMES, build
 from tracer.errors import GridcostError
-from tracer.oracle import oracle_intersect
-from tracer.rays import KINDS, make_rays
-from tracer.sortedlists import SortedLists
+from tracer.accel.oracle import oracle_intersect
+from tracer.scenes.rays import KINDS, make_rays
+from tracer.accel.sortedlists import SortedLists
 
 N_RAYS = 3000
 #: small SPD scenes the oracle can afford (and that exercise the floor/field polygons)

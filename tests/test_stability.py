@@ -32,7 +32,7 @@ def test_time_at_interpolates_in_log_log_and_never_extrapolates():
 def test_two_level_point_is_paired_with_the_sweeps_reference(load, tmp_path):
     from experiments.core.context import RunContext
     from experiments.core.sweep import sweep
-    from tracer.rays import make_rays
+    from tracer.scenes.rays import make_rays
     scene = load("bunny-948")
     store = RunContext(out=tmp_path, threads=1, quick=True).store()
     rays = {"random": make_rays(scene, "random", 2000, seed=3)}

@@ -33,7 +33,7 @@ def add_image_args(p, scenes: str, side: str | None = None, repeats: str | None 
 
 
 def scene_from_args(args):
-    from tracer.scene import load_mesh, load_scene
+    from tracer.scenes.scene import load_mesh, load_scene
     return load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
 
 

@@ -96,7 +96,7 @@ class RunContext:
             vals = self.ledger.column_values()
             for c in missing:
                 df[c] = vals[c]
-        from tracer.registry import STAND_INS
+        from tracer.scenes.registry import STAND_INS
         if "scene" in df.columns and "stand_in" not in df.columns:
             df = df.copy()
             df["stand_in"] = df.scene.map(lambda s: STAND_INS.get(s, "")).fillna("")
@@ -106,7 +106,7 @@ class RunContext:
         """meta.json: the commit that drew the file, versions, host, wall time, ``measured_by``: the
         distinct commits, hosts and clocks behind its numbers, and ``timing_noise``: the host's
         timing noise when the target started and now (:mod:`experiments.core.noise`)."""
-        from tracer.timing import host_info
+        from tracer.measure.timing import host_info
         src = self.ledger.sources()
         meta = {"target": target, "git_commit": git_commit(), "versions": versions(), "host": host_info(),
                 "wall_seconds": round(time.time() - started, 2),
@@ -156,7 +156,7 @@ class RunContext:
 
     def mark_stand_ins(self, summary_path) -> None:
         """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
-        from tracer.registry import STAND_INS
+        from tracer.scenes.registry import STAND_INS
         path = Path(summary_path)
         if not STAND_INS or not path.exists():
             return

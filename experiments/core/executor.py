@@ -18,10 +18,10 @@ def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
     """Measure one sweep point from its spec (on a worker, or locally with the client's ``scene``
     and reference structure). Returns (spec, rows); every row carries the worker's measurement key."""
     from experiments.core.point import measure
-    from tracer.timing import measurement_key
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
-    from tracer.timing import MIN_SAMPLE_SECONDS, set_threads
+    from tracer.measure.timing import measurement_key
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
+    from tracer.measure.timing import MIN_SAMPLE_SECONDS, set_threads
     if spec.get("models"):
         os.environ["GRIDCOST_MODELS"] = spec["models"]
     if spec.get("clock_env"):
@@ -47,8 +47,8 @@ class RaysRef(tuple):
 
 def _to_refs(args):
     """Scenes known by name and ray sets made by ``make_rays`` travel as references, not arrays."""
-    from tracer.rays import Rays
-    from tracer.scene import Scene
+    from tracer.scenes.rays import Rays
+    from tracer.scenes.scene import Scene
     out = []
     scene = next((a for a in args if isinstance(a, Scene)), None)
     for a in args:
@@ -63,14 +63,14 @@ def _to_refs(args):
 
 def _reloadable(scene) -> bool:
     """A scene a worker can load by its name (a registry mesh, procedural or SPD scene)."""
-    from tracer import procedural, spd
-    from tracer.scene import manifest
+    from tracer.scenes import procedural, spd
+    from tracer.scenes.scene import manifest
     return scene.name in manifest() or procedural.matches(scene.name) or spd.matches(scene.name)
 
 
 def _from_refs(args):
-    from tracer.rays import make_rays
-    from tracer.scene import load_scene
+    from tracer.scenes.rays import make_rays
+    from tracer.scenes.scene import load_scene
     scenes = {}
 
     def scene_of(name, n):
@@ -99,9 +99,9 @@ def _from_refs(args):
 def remote_task(fn, args, threads, models, code, clock_env=None):
     """Run ``fn(*args)`` on a worker with the client's thread count, models location and clock
     setting; returns (result, the worker's measurement key, its host)."""
-    from tracer.provenance import host
-    from tracer.timing import measurement_key
-    from tracer.timing import set_threads
+    from tracer.measure.provenance import host
+    from tracer.measure.timing import measurement_key
+    from tracer.measure.timing import set_threads
     if models:
         os.environ["GRIDCOST_MODELS"] = models
     if clock_env:
@@ -135,7 +135,7 @@ class LocalExecutor:
 
     def run_task(self, fn, args: tuple, threads: int, code: tuple):
         """(fn(*args), None, this host): a local task needs no key check."""
-        from tracer.provenance import host
+        from tracer.measure.provenance import host
         return fn(*args), None, host()
 
 

@@ -4,16 +4,16 @@ A penalty of 3 % means something on a host whose back-to-back timings of the sam
 1 %, and nothing on one where they scatter by 15 % (a cloud VM with busy neighbours: seen here, an
 AMD EPYC VM whose 35 ms grid traces read 35-61 ms in turn, against 5 % on an Intel VM). The meter
 times two fixed kernels, ``samples`` back-to-back samples each, on one thread with the one-thread
-clock of :func:`tracer.timing.default_clock`:
+clock of :func:`tracer.measure.timing.default_clock`:
 
-* **compute** — :func:`tracer.timing._probe_kernel` (arithmetic over 512 KiB, the thread-clock check's kernel);
-* **memory** — :func:`tracer.machine._chase`, dependent loads once round an 8 MiB random cycle (past the L2
+* **compute** — :func:`tracer.measure.timing._probe_kernel` (arithmetic over 512 KiB, the thread-clock check's kernel);
+* **memory** — :func:`tracer.measure.machine._chase`, dependent loads once round an 8 MiB random cycle (past the L2
   of the hosts seen; a neighbour's cache and memory traffic shows here first),
 
 and reports each one's coefficient of variation and (max - min) / median. It is taken when a target
 starts and when it writes meta.json (``timing_noise``: {start, end}), and the results index shows
 the larger CV. It measures the host that writes the file; points measured on Dask workers carry
-their own host in their rows. It does not count as a timing (:func:`tracer.timing.timing_calls`).
+their own host in their rows. It does not count as a timing (:func:`tracer.measure.timing.timing_calls`).
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ def timing_noise(samples: int = 11, min_sample: float = 0.02) -> dict:
     """{clock, samples, compute_cv, compute_spread, memory_cv, memory_spread} of this host now."""
     import numba
 
-    from tracer.machine import LINE, _chase, _cycle
-    from tracer.timing import _probe_kernel, clock_name, default_clock, sample_calls
+    from tracer.measure.machine import LINE, _chase, _cycle
+    from tracer.measure.timing import _probe_kernel, clock_name, default_clock, sample_calls
     if samples < 2:
         raise ValueError(f"timing_noise needs at least 2 samples, got {samples}")
     x = np.arange(1 << 16, dtype=np.float64)

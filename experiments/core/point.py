@@ -7,8 +7,8 @@ import socket
 
 import numpy as np
 
-from tracer.accel import build
-from tracer.timing import MIN_SAMPLE_SECONDS, clock_name, time_paired
+from tracer.accel import COUNTER_NAMES, build
+from tracer.measure.timing import MIN_SAMPLE_SECONDS, clock_name, time_paired
 
 #: the drift meter every sweep point is timed beside: a one-level grid of 8N cells on the same scene
 REFERENCE = ("grid", {"factor": 8.0})
@@ -52,7 +52,7 @@ def measure(scene, structure: str, params: dict, rays_by_kind: dict, repeats: in
             "ray_kind": kind, "rays": r.n, "seed": r.seed, "seconds_raw": med, "seconds_min": float(p.min()),
             "spread": float((p.max() - p.min()) / med), "ref_seconds": float(np.median(q)),
             "ratio_to_ref": float(np.median(p / q)), "clock": clock_name(), "ns_per_ray_raw": med / r.n * 1e9,
-            **{k: mean[k] for k in ("setups", "steps", "tests", "nodes", "skips", "occupied")},
+            **{k: mean[k] for k in COUNTER_NAMES},
             "hits": float((hits.tri_id >= 0).mean()),
             "threads": numba.get_num_threads(), "worker": socket.gethostname(),
         })

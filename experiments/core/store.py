@@ -12,28 +12,14 @@ import hashlib
 import json
 import os
 import subprocess
-import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
 
+from tracer.storage import atomic_write  # noqa: F401 (the one atomic write, re-exported for targets)
+
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def atomic_write(path, data: str | bytes) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
 
 
 def write_json(path, obj) -> Path:
@@ -96,7 +82,7 @@ class Ledger:
         self.reset()
 
     def reset(self) -> None:
-        from tracer.timing import timing_calls
+        from tracer.measure.timing import timing_calls
         self.served: dict[tuple, int] = {}
         self.stale = 0
         self.reused = 0
@@ -107,8 +93,8 @@ class Ledger:
     def now(self) -> dict:
         """Provenance of a measurement made now (commit read once per target run)."""
         if self._now is None:
-            from tracer.provenance import host
-            from tracer.timing import clock_name
+            from tracer.measure.provenance import host
+            from tracer.measure.timing import clock_name
             self._now = {"commit": git_commit(), "host": host(), "clock": clock_name()}
         return dict(self._now)
 
@@ -118,7 +104,7 @@ class Ledger:
         self.stale += bool(stale)
 
     def timed_now(self) -> bool:
-        from tracer.timing import timing_calls
+        from tracer.measure.timing import timing_calls
         return timing_calls() > self._timing_calls0
 
     def sources(self) -> list[dict]:
@@ -141,7 +127,7 @@ class Ledger:
 
 class PointStore:
     """One JSON file per measured point, named by the point's parameters and holding the
-    measurement key (:func:`tracer.timing.measurement_key`: code digest, threads, clock, CPU,
+    measurement key (:func:`tracer.measure.timing.measurement_key`: code digest, threads, clock, CPU,
     library versions) and the provenance (commit, host, clock, time) of the measurement.
 
     A stored point whose key differs from the current one (other code, threads, clock, CPU) is
@@ -164,7 +150,7 @@ class PointStore:
 
     @property
     def measurement_key(self) -> dict:
-        from tracer.timing import measurement_key
+        from tracer.measure.timing import measurement_key
         return measurement_key(self.code)
 
     @staticmethod

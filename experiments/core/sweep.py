@@ -129,15 +129,15 @@ def _paired_budget(quick: bool) -> tuple[int, int, dict]:
 
 
 def penalty_ci(times: dict, target, best) -> tuple[float, float]:
-    """95 % interval (%, :func:`tracer.timing.median_ci`) of the median per-round ratio of ``target``
+    """95 % interval (%, :func:`tracer.measure.timing.median_ci`) of the median per-round ratio of ``target``
     to ``best`` (lists of per-round seconds in ``times``), as a penalty."""
-    from tracer.timing import median_ci
+    from tracer.measure.timing import median_ci
     lo, hi = median_ci(np.asarray(times[target]) / np.asarray(times[best]))
     return penalty_pct(lo, 1.0), penalty_pct(hi, 1.0)
 
 
 def _unsettled(targets, half_width_pct: float):
-    """``more`` of :func:`tracer.timing.time_paired`: true while the interval of some target's
+    """``more`` of :func:`tracer.measure.timing.time_paired`: true while the interval of some target's
     penalty against the current best (fastest by median; against the next fastest for the best
     itself) is wider than ``half_width_pct`` on either side."""
     def more(times: dict) -> bool:
@@ -155,7 +155,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
                      quick: bool = False, others: dict | None = None) -> dict:
     """Penalty of each of ``targets`` (name -> parameters, e.g. the theory's M) against the best of
     them and ``candidates`` (e.g. the three fastest swept points), re-measured side by side in
-    interleaved rounds (:func:`tracer.timing.time_paired`) on one ray set, so the slow drifts of a
+    interleaved rounds (:func:`tracer.measure.timing.time_paired`) on one ray set, so the slow drifts of a
     shared machine cancel, and the points are compared directly rather than through the reference
     each sweep point was timed beside. The best is the fastest point by median time; a target's penalty is
     the median over rounds of its per-round ratio to the best (0 for the best itself). Returns name
@@ -163,7 +163,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     like a sweep point (resumable). ``others`` (name -> (structure, parameters), e.g. the best
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
-    from tracer.timing import paired_ratio
+    from tracer.measure.timing import paired_ratio
     rounds, repeats, timing = _paired_budget(quick)
     points = []
     for p in list(targets.values()) + list(candidates):
@@ -210,7 +210,7 @@ def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=N
     then time them all in interleaved rounds: index or name -> per-round seconds (samples of at
     least ``min_sample`` seconds; None: the default). ``adapt`` = (target indices, max rounds,
     half-width %) adds rounds until the targets' penalties are known that well (:func:`_unsettled`)."""
-    from tracer.timing import MIN_SAMPLE_SECONDS, time_paired
+    from tracer.measure.timing import MIN_SAMPLE_SECONDS, time_paired
     accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
     for name, (st, p) in (others or {}).items():
         accels[name] = build(scene, st, **p)

@@ -49,7 +49,7 @@ class TargetRun:
     def scenes(self, desc: str | None = None):
         """(name, loaded scene) of every scene of the run, in order; with ``desc``, behind a progress
         bar (silent under ``--json``)."""
-        from tracer.scene import load_scene
+        from tracer.scenes.scene import load_scene
         names = self.names if desc is None else progress(self.names, desc, quiet=getattr(self.args, "json", False))
         for name in names:
             yield name, load_scene(name)
@@ -71,9 +71,9 @@ class TargetRun:
 
 
 def begin(ctx, args, name: str, scenes: tuple, threads=None, log: Callable = print) -> TargetRun:
-    """Start target ``name``: the clock, :func:`tracer.timing.set_threads` (``threads``; None: the
+    """Start target ``name``: the clock, :func:`tracer.measure.timing.set_threads` (``threads``; None: the
     library's default), the scenes (``scenes`` = (quick list, full list), ``--scenes`` first)."""
-    from tracer.timing import set_threads
+    from tracer.measure.timing import set_threads
     started = time.time()
     n = set_threads(threads)
     return TargetRun(ctx=ctx, args=args, name=name, threads=n, names=scene_list(args, *scenes), started=started,
@@ -81,8 +81,8 @@ def begin(ctx, args, name: str, scenes: tuple, threads=None, log: Callable = pri
 
 
 def kind_rays(scene, kinds, n: int, seed: int) -> dict:
-    """``n`` rays of every kind in ``kinds`` (:func:`tracer.rays.make_rays`), kind -> rays."""
-    from tracer.rays import make_rays
+    """``n`` rays of every kind in ``kinds`` (:func:`tracer.scenes.rays.make_rays`), kind -> rays."""
+    from tracer.scenes.rays import make_rays
     return {k: make_rays(scene, k, n, seed=seed) for k in kinds}
 
 

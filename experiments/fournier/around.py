@@ -21,7 +21,7 @@ FLAT_CHUNK_ELEMENTS = 4_000_000
 def flat_object_counts(boxes, o, d, f) -> dict:
     """Per ray, what the flat sorted lists of the paper's Table 1 do when the objects are the boxes
     ``boxes`` ((M, 6) lo xyz, hi xyz) and the closest hit lies at ``f`` (inf: none), counted as
-    :class:`tracer.sortedlists.SortedLists` (``hierarchy=False``) counts them: the root (the box of
+    :class:`tracer.accel.sortedlists.SortedLists` (``hierarchy=False``) counts them: the root (the box of
     all objects) is opened at the ray's entry into it (t ≥ 0), treating the events before it; the
     walk then treats events in Δt order and stops past ``f`` or at the end of a list (the root's
     exit). An object is tested when entered on all three axes before it is exited on any, at or
@@ -87,7 +87,7 @@ def _trace(acc, o, d, tmax, count=True):
     from tracer.accel import Counters, as_rays, tmax_array
     ro, rd = as_rays(o, d)
     t, ids, cnt = acc._trace(ro, rd, 0.0, tmax_array(tmax, len(ro)), tmax is not None, count)
-    return t, ids, (Counters(cnt) if count else None)
+    return t, ids, (Counters(cnt, acc.counter_fields) if count else None)
 
 
 def measure_around(res, repeats, leaf_size, branching) -> list[dict]:
@@ -95,10 +95,10 @@ def measure_around(res, repeats, leaf_size, branching) -> list[dict]:
     shadow ray (to the point light; any hit) and one mirror reflection ray each, through the 30³
     grid (plain and mailboxed) and the sorted-list hierarchy: counts per ray kind and over all rays,
     hits checked against the float64 oracle, and the time of the whole set (lists vs grid, paired)."""
-    from tracer.grid import UniformGrid
-    from tracer.oracle import oracle_intersect
-    from tracer.sortedlists import SortedLists
-    from tracer.timing import build_clock, paired_ratio, time_paired
+    from tracer.accel.grid import UniformGrid
+    from tracer.accel.oracle import oracle_intersect
+    from tracer.accel.sortedlists import SortedLists
+    from tracer.measure.timing import build_clock, paired_ratio, time_paired
     from experiments.fournier.scenes import around_again_primary, around_again_scene, secondary_rays
     scene, kind = around_again_scene()
     o, d = around_again_primary(res)

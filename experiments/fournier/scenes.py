@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracer.scenetype import Scene
-from tracer.spd import pinhole_rays as spd_pinhole_rays
+from tracer.scenes.scenetype import Scene
+from tracer.scenes.spd import pinhole_rays as spd_pinhole_rays
 
 #: triangles per patch of the Utah teapot mesh, in its stored order: rim 4, body 8, handle 4,
 #: spout 4, lid 8 (the 4 knob patches lose their 10 degenerate pole triangles), bottom 4 (likewise)
@@ -45,7 +45,7 @@ def _quad(p0, p1, p2, p3) -> np.ndarray:
 # ---------------------------------------------------------------- Newell's teapot
 def teapot_patches():
     """(triangles of Newell's 28 patches, z up, (n, 3, 3) float64; patch id per triangle)."""
-    from tracer.scene import load_scene
+    from tracer.scenes.scene import load_scene
     pot = load_scene("teapot").tris.astype(np.float64)
     assert len(pot) == sum(TEAPOT_PATCH_TRIS), "the teapot mesh is not the 32-patch tessellation"
     ids = np.repeat(np.arange(len(TEAPOT_PATCH_TRIS)), TEAPOT_PATCH_TRIS)

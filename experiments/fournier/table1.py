@@ -74,8 +74,8 @@ def add_arguments(p) -> None:
 
 
 def _structure(kind, args):
-    from tracer.grid import UniformGrid
-    from tracer.sortedlists import SortedLists
+    from tracer.accel.grid import UniformGrid
+    from tracer.accel.sortedlists import SortedLists
     if kind in ("grid30", "grid30mb"):
         return UniformGrid(res=(30, 30, 30), mailbox=(kind == "grid30mb"))
     if kind == "nogrid":
@@ -113,7 +113,7 @@ def _scene_and_rays(name, res):
         from experiments.fournier.scenes import teapot_rays, teapot_scene
         scene, _, n_obj = teapot_scene()
         return scene, TEAPOT, 1, n_obj, teapot_rays(res)
-    from tracer.spd import parse, spd_camera_rays, spd_objects, spd_scene
+    from tracer.scenes.spd import parse, spd_camera_rays, spd_objects, spd_scene
     family, sf = parse(name)
     return spd_scene(name), family, sf, spd_objects(name), spd_camera_rays(name, res)
 
@@ -124,8 +124,8 @@ def measure_scene(name, args, res, repeats, flat_max) -> list[dict]:
     grid paired); for Table 1's scenes also the flat lists counted per object (the paper's objects,
     :func:`object_ids`). One task of the run; ``args`` holds nogrid_max, leaf_size and branching."""
     from experiments.fournier.around import object_boxes, flat_object_counts
-    from tracer.oracle import oracle_intersect
-    from tracer.timing import build_clock, paired_ratio, time_call, time_paired
+    from tracer.accel.oracle import oracle_intersect
+    from tracer.measure.timing import build_clock, paired_ratio, time_call, time_paired
     scene, family, sf, n_obj, (o, d) = _scene_and_rays(name, res)
     n = scene.n
     # the teapot's Table 1 row needs the flat lists and the no-grid time whatever the limits
@@ -187,8 +187,8 @@ def measure_scene(name, args, res, repeats, flat_max) -> list[dict]:
 
 
 def run(ctx, args, log=print) -> dict:
-    from tracer.spd import parse
-    from tracer.timing import set_threads
+    from tracer.scenes.spd import parse
+    from tracer.measure.timing import set_threads
     started = time.time()
     threads = set_threads(args.threads or 1)
     quick = args.quick
@@ -311,7 +311,7 @@ def _summary(df, wide, t1, res, repeats, threads, args, around=None) -> str:
     g = lambda r, k: r[k] if k in r and pd.notna(r[k]) else None  # noqa: E731
     lines = [
         "# Table 1 (Fournier & Poulin 1993): sorted event lists vs a 30³ uniform grid", "",
-        f"SPD scenes made of triangles (`tracer.spd`) and Newell's teapot on a floor (`experiments/fournier/scenes.py`), "
+        f"SPD scenes made of triangles (`tracer.scenes.spd`) and Newell's teapot on a floor (`experiments/fournier/scenes.py`), "
         f"{res}x{res} eye rays from each scene's viewpoint ({res * res:,} rays per scene; eye rays only, no shadow or "
         f"reflection rays in these tables), {threads} thread(s), median of {repeats} timed run(s). Sorted lists: "
         f"`SortedLists(leaf_size={args.leaf_size}, branching={args.branching})` (hierarchy) and "

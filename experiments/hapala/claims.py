@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-#: our stand-in -> (the paper's scene, recipe). Arrays of copies (tracer.derived.array) with N = k
+#: our stand-in -> (the paper's scene, recipe). Arrays of copies (tracer.scenes.derived.array) with N = k
 #: copies of the base mesh near the paper's N, the gap chosen once so that Havran's sigma (grid of N
 #: cells, costmodel.havran) is near the paper's; table1h measures and prints the sigma it gets.
 STAND_INS = {

@@ -23,7 +23,7 @@ from costmodel.select import DEFAULT_SAMPLE, GRID_FACTOR, GridcostEstimator, Hap
 from experiments.core.common import emit_json
 from experiments.core.store import atomic_write
 from experiments.hapala.table1 import measure_all, load_any
-from tracer.constants import HAPALA_EPS
+from tracer.accel.constants import HAPALA_EPS
 from tracer.errors import GridcostError
 
 #: the built-in calibration when results/table1h is missing: small scenes, few rays (seconds)
@@ -64,8 +64,8 @@ def calibration(ctx, out, quick: bool, log=print):
 
 
 def run(ctx, args, log=print) -> dict:
-    from tracer.scene import load_mesh
-    from tracer.timing import set_threads
+    from tracer.scenes.scene import load_mesh
+    from tracer.measure.timing import set_threads
     started = time.time()
     if args.rays < 0:
         raise GridcostError(f"--rays must be >= 0, got {args.rays:g}")
@@ -83,7 +83,7 @@ def run(ctx, args, log=print) -> dict:
 def evaluate(ctx, args, log=print) -> pd.DataFrame:
     """The decision on each evaluation scene (left out of its own calibration) against its measured truth."""
     from experiments.hapala.table1 import settings
-    from tracer.timing import set_threads
+    from tracer.measure.timing import set_threads
     started = time.time()
     set_threads(args.threads or 1)
     names = QUICK_EVAL if args.quick else EVAL_SCENES

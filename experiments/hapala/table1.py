@@ -21,7 +21,7 @@ from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats,
 from experiments.core.store import atomic_write, write_json
 from experiments.hapala.claims import STAND_INS, claims, claims_markdown
 from experiments.core.common import progress
-from tracer.timing import set_threads
+from tracer.measure.timing import set_threads
 
 KINDS = ("random", "path")
 #: the paper's Table 1: scene, N, sigma, T_B^G ms, T_B^H ms, random (t_G us, t_H us, R_C), path (t_G, t_H, R_C)
@@ -70,10 +70,10 @@ QUICK = ["cornell", "boxes-44", "bunny-948", "suzanne", "cylinder-196", "particl
 # ---------------------------------------------------------------- calibration phase (Hapala Sec 3, steps 1-4)
 def _timed_build(scene, structure, params, repeats):
     """(structure, build seconds {median, min} of ``repeats`` builds after a warm-up, the structure's
-    own build_s). Builds are timed with wall time (:data:`tracer.timing.build_clock`): a library may
+    own build_s). Builds are timed with wall time (:data:`tracer.measure.timing.build_clock`): a library may
     build on threads the calling thread's CPU time does not see."""
     from tracer.accel import build
-    from tracer.timing import build_clock
+    from tracer.measure.timing import build_clock
     acc = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
     cpu, wall = [], []
     for _ in range(max(repeats, 1)):
@@ -86,9 +86,9 @@ def _timed_build(scene, structure, params, repeats):
 
 def paired_times(fns: dict, repeats: int) -> dict:
     """Per-call time {median, min} of each function over ``repeats`` interleaved rounds
-    (:func:`tracer.timing.time_paired`, one sample per function per round, on the default clock), so
+    (:func:`tracer.measure.timing.time_paired`, one sample per function per round, on the default clock), so
     that busy phases of a shared machine hit every structure alike."""
-    from tracer.timing import time_paired
+    from tracer.measure.timing import time_paired
     return {k: time_stats(v) for k, v in time_paired(fns, rounds=repeats, repeats=1).items()}
 
 
@@ -106,7 +106,7 @@ def calibrate_scene(scene, kinds=("random", "path"), n_rays: int = 10_000, sampl
 
 
 def _calibrate(scene, kinds, n_rays, samples, repeats, grid_factor, hiers, seed) -> dict:
-    from tracer.rays import make_rays
+    from tracer.scenes.rays import make_rays
     t0 = time.perf_counter()
     grid, T_BG, T_BG_wall = _timed_build(scene, "grid", {"factor": grid_factor}, repeats)
     gs = grid.stats()
@@ -158,8 +158,8 @@ def add_arguments(p) -> None:
 
 
 def load_any(name: str):
-    """A named scene (mesh, procedural or SPD: one registry, :func:`tracer.scene.load_scene`) or a path."""
-    from tracer.scene import load_scene
+    """A named scene (mesh, procedural or SPD: one registry, :func:`tracer.scenes.scene.load_scene`) or a path."""
+    from tracer.scenes.scene import load_scene
     return load_scene(name)
 
 
@@ -168,7 +168,7 @@ def default_scenes(quick: bool) -> list[str]:
     matched to the paper's scenes (:data:`experiments.hapala.claims.STAND_INS`)."""
     if quick:
         return list(QUICK)
-    from tracer.scene import manifest
+    from tracer.scenes.scene import manifest
     return sorted(manifest()) + PROCEDURAL + SPD + list(STAND_INS)
 
 
@@ -335,7 +335,7 @@ def summary(tab: pd.DataFrame, cfg: dict, threads: int, hier_note: str, notes=()
     f1 = lambda v: "–" if v is None or (isinstance(v, float) and np.isnan(v)) else f"{v:,.1f}"  # noqa: E731
     wins = {k: (int(np.isinf(tab[f"R_C_{k}"]).sum()), int(np.isfinite(tab[f"R_C_{k}"]).sum())) for k in KINDS}
     lines = ["# Table 1 (Hapala, Karlik & Havran 2011): uniform grid vs kd-tree, build and per-ray times, R_C", "",
-             f"{len(tab)} scenes; grid cells = {cfg['grid_factor']:g} N; kd-tree = pbrt-v2 SAH (tracer.kdtree); "
+             f"{len(tab)} scenes; grid cells = {cfg['grid_factor']:g} N; kd-tree = pbrt-v2 SAH (tracer.accel.kdtree); "
              f"{cfg['rays']:,} rays per kind. Times are the tracing thread's CPU time, single-threaded (the 2 cores are "
              f"shared: wall time is inflated by other processes, CPU time much less); every time is the minimum over "
              f"repeats (interference only adds time; medians are kept in raw.json): builds over {cfg['repeats']} builds "
@@ -355,7 +355,7 @@ def summary(tab: pd.DataFrame, cfg: dict, threads: int, hier_note: str, notes=()
     lines += ["", "## Ours beside the paper (scenes we share; the paper's numbers in parentheses)", "",
               "Same model or recipe, different tessellation for some (our cornell has 36 triangles, the paper's 2,450; "
               "our `room` stands in for the conference room). `array-<k>-<gap>-<mesh>` rows are stand-ins built for the "
-              "paper's scenes we lack (tracer.derived): k copies of a mesh, N near the paper's, spread so that σ is near "
+              "paper's scenes we lack (tracer.scenes.derived): k copies of a mesh, N near the paper's, spread so that σ is near "
               "the paper's; they match the paper's N and σ, not its objects. The paper ran C++ on a 2011 Core 2 Duo, so absolute "
               "times differ; the ratios T_B^H / T_B^G and t_R^G / t_R^H are the comparable part.", "",
               "| scene (paper) | N | σ | T_B^H / T_B^G | random t_G / t_H | random R_C | path t_G / t_H | path R_C |",
@@ -424,7 +424,7 @@ def run(ctx, args, log=print) -> dict:
     ctx.write_csv(out_dir / "table1h.csv", tab)
     bvh = table(raw, hier="bvh")
     nb = {k: int(np.isfinite(bvh[f"R_C_{k}"]).sum()) for k in KINDS}
-    note = (f"With the BVH (tracer.bvh, binned SAH) as the hierarchy instead, the hierarchy pays off in "
+    note = (f"With the BVH (tracer.accel.bvh, binned SAH) as the hierarchy instead, the hierarchy pays off in "
             f"{nb['random']} (random) / {nb['path']} (path) of {len(bvh)} scenes (calibration.csv, hier = bvh).")
     md = summary(tab, cfg, threads, note, notes=[stadium_note(raw, tab)])
     cmp_, cmp_md = hierarchy_comparison({"kd-tree": tab, "BVH": bvh})

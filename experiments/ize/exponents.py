@@ -16,9 +16,9 @@ from costmodel.fit import ExponentFit, refine_minimum, work_cost
 from experiments.ize.table3 import cells_sweep
 from experiments.core.store import atomic_write
 from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
+from tracer.scenes.rays import make_rays
+from tracer.scenes.scene import load_scene
+from tracer.measure.timing import set_threads
 
 #: family -> (scenes, quick scenes, sweep kind, theory exponent, paper's empirical exponent)
 FAMILIES = {

@@ -12,9 +12,9 @@ import pandas as pd
 from experiments.core.store import atomic_write
 from experiments.ize import memmodel
 from experiments.core.sweep import PAIRED_REPEATS, PAIRED_ROUNDS, paired_plane, sweep
-from tracer.rays import make_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads
+from tracer.scenes.rays import make_rays
+from tracer.scenes.scene import load_scene
+from tracer.measure.timing import set_threads
 
 #: Table 2 / Table 4's five scenes, the Fig 5 scenes of earlier runs (bunny-69k, dragon-48k) and the cylinder
 SCENES = {"bunny-948": "compact", "bunny-69k": "compact", "dragon-11k": "compact", "dragon-48k": "compact",

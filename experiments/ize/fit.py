@@ -17,8 +17,8 @@ from experiments.core.common import add_scene_args, scene_from_args
 from experiments.core.store import atomic_write, write_json
 from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, paired_penalties, penalty_pct,
                                sweep)
-from tracer.rays import make_rays
-from tracer.timing import set_threads
+from tracer.scenes.rays import make_rays
+from tracer.measure.timing import set_threads
 
 
 def add_arguments(p) -> None:

@@ -3,7 +3,7 @@ scene (:mod:`costmodel.memory`).
 
 For a scene of a table, the model's constants are fitted on the *other* scenes swept in the same run
 (same ray kind; Tsetup per scene, Ts0, Ti and kappa pooled) with the host's load-latency curve
-(:class:`tracer.machine.MachineModel`); its M is the minimum of the prediction over the scene's
+(:class:`tracer.measure.machine.MachineModel`); its M is the minimum of the prediction over the scene's
 counters (counted at the swept M, interpolated between them). With a single scene in the run the fit
 is the scene's own (marked ``in-sample``). ``calibrate=True`` then refits Tsetup, Ts0 and Ti on three
 of the scene's own swept points (:class:`costmodel.memory.SceneCalibratedFit`), keeping kappa.
@@ -20,7 +20,7 @@ _MACHINE = {}
 
 def machine(quick: bool = False, log=None):
     """The host's machine model, loaded (or probed) once per process."""
-    from tracer.machine import MachineModel
+    from tracer.measure.machine import MachineModel
     if quick not in _MACHINE:
         _MACHINE[quick] = MachineModel.load(quick=quick, log=log)
     return _MACHINE[quick]

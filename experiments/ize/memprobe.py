@@ -3,7 +3,7 @@ of a triangle test on a cylinder, and attribute what the measured time has on to
 memory traffic of a structure that outgrows the caches.
 
 Ize 2007's cost model (Eq 1 / Eq 5) charges Ts per cell step and Ti per triangle test, whatever the
-grid's size. The probes measure, in this run and side by side (:func:`tracer.timing.time_paired`):
+grid's size. The probes measure, in this run and side by side (:func:`tracer.measure.timing.time_paired`):
 
 - **T0 and Ts (empty)**: rays inside a cylinder's hollow cross only empty cells; timing them through
   three grids of increasing size gives the per-ray set-up T0 (intercept) and the cost of an empty
@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracer.accel import build
-from tracer.timing import time_paired
+from tracer.measure.timing import time_paired
 
 #: cells of the three grids the empty-step probe times (spanning 3 decades of M)
 PROBE_CELLS = (8_000.0, 125_000.0, 1_000_000.0)

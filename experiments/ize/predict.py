@@ -11,7 +11,7 @@ Models (:mod:`costmodel.memory`), simplest first:
 1. **paper** — Ize's count model with Ti/Ts = 4: T = Tsetup + b (steps + 4 tests), b pooled;
 2. **counter** — T = Tsetup + Ts steps + Ti tests, Ts and Ti pooled (:class:`MemoryCostFit`, no memory term);
 3. **memory-aware** — the counter model plus kappa (steps x(B_cells) + occupied x(B_data)), x(B)
-   the host's load latency at working set B over an L1 hit (:class:`tracer.machine.MachineModel`);
+   the host's load latency at working set B over an L1 hit (:class:`tracer.measure.machine.MachineModel`);
 4. **entry-refs** — the counter model plus kappa_e setups x(B_cells) (the load of the cell a ray
    enters the grid by, at the cell array's latency) and Ts_r steps ln(refs/N) (a step cost growing
    with the cells a triangle overlaps) (:class:`costmodel.memory.EntryRefsCostFit`);

@@ -29,7 +29,7 @@ import pandas as pd
 from costmodel.fit import CounterCostFit
 from experiments.ize import memmodel
 from experiments.core.store import atomic_write, read_csv
-from tracer.constants import IZE_M_FACTOR, PBRT_GRID_MAX_VOXELS, WALD_LAMBDA
+from tracer.accel.constants import IZE_M_FACTOR, PBRT_GRID_MAX_VOXELS, WALD_LAMBDA
 
 
 def add_arguments(p) -> None:
@@ -49,7 +49,7 @@ def rule_cells(scene, ti_over_ts: float, memory: dict | None = None) -> dict:
     """Cell count of every one-level rule for ``scene`` (rule name -> M), and the model rules of
     ``memory`` (name -> M, e.g. :data:`MEMORY_AWARE` -> the M of
     :func:`experiments.ize.memmodel.memory_aware_cells`), when given."""
-    from tracer.grid import res_pbrt, res_wald
+    from tracer.accel.grid import res_pbrt, res_wald
     n = scene.n
     out = {"8N (Ize Eq 4, Ti/Ts = 4)": IZE_M_FACTOR * n,
            "2N·Ti/Ts (Eq 4, Ti/Ts fitted here)": 2 * n * ti_over_ts,
@@ -67,7 +67,7 @@ def two_level_penalty(scene, k: pd.DataFrame, store, repeats: int) -> tuple[floa
     in the same rounds (``ratio_to_ref``) is compared with the one-level points' ratios: paired,
     drift-free, and independent of when (and on which clock) the one-level curve was measured."""
     from experiments.core.sweep import sweep
-    from tracer.rays import make_rays
+    from tracer.scenes.rays import make_rays
     rays = {"random": make_rays(scene, "random", int(k.rays.iloc[0]), seed=int(k.seed.iloc[0]))}
     row = sweep(scene, "nested", [TWO_LEVEL_PARAMS], rays, store, repeats, desc=f"stability {scene.name} two-level")[0]
     return 100 * (float(row["ratio_to_ref"]) / float(k.ratio_to_ref.min()) - 1), row
@@ -93,8 +93,8 @@ def _points(ctx, args) -> pd.DataFrame:
 
 
 def main(ctx, args) -> int:
-    from tracer.scene import load_scene
-    from tracer.timing import set_threads
+    from tracer.scenes.scene import load_scene
+    from tracer.measure.timing import set_threads
     started = time.time()
     threads = set_threads(args.threads or 1)
     pts = _points(ctx, args)

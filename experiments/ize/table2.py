@@ -21,8 +21,8 @@ from experiments.core.store import read_csv
 from experiments.core.sweep import (penalty_range, FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
                                penalty_pct, sweep)
 from experiments.core.target import begin, kind_rays, run_quiet
-from tracer.constants import IZE_TI_OVER_TS
-from tracer.timing import clock_name
+from tracer.accel.constants import IZE_TI_OVER_TS
+from tracer.measure.timing import clock_name
 
 #: our scene, the paper's model, paper N, paper empirical M, paper theoretical M (8N), paper penalty %
 PAPER = [

@@ -14,7 +14,7 @@ from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
-from tracer.memory import cache_bytes
+from tracer.measure.memory import cache_bytes
 
 #: scene, paper N, paper empirical M, paper theoretical M, paper penalty %, paper speed-up, paper size x
 PAPER = [
@@ -180,7 +180,7 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
               "M = 8N and the memory blow-up are the trade-off the paper describes: super-linear memory buys "
               "sub-linear time, less of it here, since the memory itself costs time.", "",
               "The memory-aware column prices that traffic instead of absorbing it: the counter model plus the host's "
-              "measured load latency at each grid's working set (`costmodel/memory.py`, `tracer/machine.py`), constants "
+              "measured load latency at each grid's working set (`costmodel/memory.py`, `tracer/measure/machine.py`), constants "
               f"fitted on the other cylinders of this run ({tab.memory_fit.iloc[0]}); its M costs "
               f"{tab.penalty_memory_pct.max():.1f} % (random) and {tab.penalty_memory_pct_camera.max():.1f} % (camera) "
               "over the best at worst."]

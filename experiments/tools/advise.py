@@ -143,7 +143,7 @@ def probe_pool(scene, kind: str, seed: int) -> list:
     (repeated rays stay in the caches); 10 such sets in turn 1.07-1.26 (a run's neighbours were
     evicted since); the whole frame with its packets shuffled 1.27 (particles-100k, grid)."""
     import numpy as np
-    from tracer.rays import Rays, make_rays
+    from tracer.scenes.rays import Rays, make_rays
     if kind != "camera":
         r = make_rays(scene, kind, PROBE_SETS * PROBE_RAYS, seed=seed)
         return [Rays(np.ascontiguousarray(r.origins[k::PROBE_SETS]), np.ascontiguousarray(r.directions[k::PROBE_SETS]),
@@ -222,12 +222,12 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
     equal-sized sets traced in turn, one per call: :func:`probe_pool`): build seconds = median of
     ``build_repeats`` builds after a warm-up (wall clock; None: 3 builds when one takes under
     PROBE_REBUILD_S, else 1), per-ray seconds = median over ``repeats`` interleaved rounds of tracing
-    a ray set with every structure (:func:`tracer.timing.time_paired`, default clock), so a busy
+    a ray set with every structure (:func:`tracer.measure.timing.time_paired`, default clock), so a busy
     phase of the shared machine hits every structure alike. Returns structure -> {build_s, ray_s,
     build_spread, ray_spread (relative: (max - min) / median), rays}."""
     import numpy as np
     from tracer.accel import build
-    from tracer.timing import build_clock, time_paired
+    from tracer.measure.timing import build_clock, time_paired
     pool = list(rays) if isinstance(rays, list) else [rays]  # (a Rays is a NamedTuple)
     n_rays = pool[0].n
     if any(r.n != n_rays for r in pool):
@@ -262,7 +262,7 @@ def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 
     jittered inside the pixel, as a renderer's next frame, since the unjittered frame is the
     probes'), :func:`time_structures` with ``repeats`` builds and rounds."""
     import numpy as np
-    from tracer.rays import camera_rays, make_rays
+    from tracer.scenes.rays import camera_rays, make_rays
     if kind == "camera":
         side = max(1, int(round(np.sqrt(n_rays))))
         rays = camera_rays(scene, side, max(1, int(n_rays) // side), seed=seed + 1, jitter=True)
@@ -282,8 +282,8 @@ def _check(scene, kind, R, cands, seed) -> None:
 
 
 def main(ctx, args) -> int:
-    from tracer.scene import load_mesh, load_scene
-    from tracer.timing import set_threads
+    from tracer.scenes.scene import load_mesh, load_scene
+    from tracer.measure.timing import set_threads
     started = time.time()
     if not args.rays >= 1:
         raise GridcostError(f"--rays must be >= 1, got {args.rays:g}")

@@ -23,7 +23,7 @@ import pandas as pd
 
 from experiments.core.store import atomic_write
 from experiments.tools import advise
-from tracer.timing import set_threads
+from tracer.measure.timing import set_threads
 
 #: mesh -> (kind of mesh, why it was chosen)
 MESHES = {
@@ -113,7 +113,7 @@ def summarise_row(scene, kind, R, pick, meas, best, rays) -> dict:
 
 
 def main(ctx, args) -> int:
-    from tracer.scene import load_scene
+    from tracer.scenes.scene import load_scene
     import os
     started, load0 = time.time(), os.getloadavg()[0]
     threads = set_threads(args.threads or 1)
@@ -135,7 +135,7 @@ def main(ctx, args) -> int:
     out_dir = Path(args.out) / "advise-check"
     ctx.write_csv(out_dir / "advise_check.csv", df)
     ctx.write_csv(out_dir / "candidates.csv", cdf)
-    from tracer.timing import clock_name
+    from tracer.measure.timing import clock_name
     load = (load0, os.getloadavg()[0])
     md = _summary(df, cdf, {**MESHES, **QUICK_MESHES}, n_rays, repeats) + (
         f"\nClock of the traces: {clock_name()}; 1-minute load average {load[0]:.1f} at the start, {load[1]:.1f} at the "

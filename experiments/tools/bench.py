@@ -19,9 +19,9 @@ from experiments.core.common import add_scene_args, emit_json, scene_from_args
 from experiments.core.store import atomic_write, write_json
 from experiments.core.common import progress
 from tracer.accel import build
-from tracer.memory import memory_budget
-from tracer.rays import make_rays
-from tracer.timing import build_clock, host_info, set_threads, time_call
+from tracer.measure.memory import memory_budget
+from tracer.scenes.rays import make_rays
+from tracer.measure.timing import build_clock, host_info, set_threads, time_call
 
 #: name -> (structure, params) of every variant benchmarked; grid cells = factor * N
 VARIANTS = {
@@ -63,7 +63,7 @@ TRIMESH_MIN_RAYS = 100
 
 def trimesh_ray_count(wanted: int, n_faces: int) -> int:
     """Rays for trimesh's tracer: ``wanted``, fewer when TRIMESH_BYTES_PER_PAIR x rays x faces would
-    exceed the memory budget (:func:`tracer.memory.memory_budget`)."""
+    exceed the memory budget (:func:`tracer.measure.memory.memory_budget`)."""
     return int(min(wanted, memory_budget() // (TRIMESH_BYTES_PER_PAIR * max(n_faces, 1))))
 
 
@@ -115,7 +115,7 @@ def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
 
 def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print,
               sah_scenes=None) -> dict:
-    from tracer.reference import EmbreeAccel, TrimeshAccel
+    from tracer.accel.reference import EmbreeAccel, TrimeshAccel
     threads = set_threads(threads)
     rays = {"random": make_rays(scene, "random", n_rays, seed=seed),
             "camera": make_rays(scene, "camera", n_rays, seed=seed)}
@@ -180,12 +180,12 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
 
 
 def _paired(rays, kept, threads, log, rounds: int = 7) -> dict:
-    """The headline ratios measured in interleaved rounds (:func:`tracer.timing.time_paired`): each of
+    """The headline ratios measured in interleaved rounds (:func:`tracer.measure.timing.time_paired`): each of
     :data:`PAIRED` that ran against Embree (all one thread, in the same rounds), and the grid's scaling
     from 1 to ``threads`` threads (wall time for both). Median, min and max of the per-round ratios."""
     import numba
 
-    from tracer.timing import paired_ratio, time_paired
+    from tracer.measure.timing import paired_ratio, time_paired
     out = {}
     if "grid" not in kept:
         return out

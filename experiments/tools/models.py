@@ -1,6 +1,6 @@
 """``python -m experiments.run models [--download] [--json]``: every named scene, its faces, where it was found
 (path and lookup step: --models / $GRIDCOST_MODELS, ../shared/models, shipped in tracer/data, the user cache) or
-that it is missing and how to get it (URL, environment variable), and its licence (see :mod:`tracer.registry`).
+that it is missing and how to get it (URL, environment variable), and its licence (see :mod:`tracer.scenes.registry`).
 
 Files found are checked against the registry's sha256. ``--download`` fetches the missing meshes into the user
 cache first (pooch; needs the network). Text mode prints a table and the notes; ``--json`` prints exactly one
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+from tracer.storage import atomic_write
 
 
 def add_arguments(parser) -> None:
@@ -20,25 +20,10 @@ def add_arguments(parser) -> None:
                         help="download the missing meshes into the user cache first (pooch, sha256-verified)")
 
 
-def _atomic_write(path: str, text: str) -> None:
-    d = os.path.dirname(path) or "."
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=".tmp-", suffix=os.path.basename(path))
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def report(download: bool = False) -> dict:
     """Every registry mesh with where it is (verified), MANIFEST-only meshes and the procedural scenes."""
-    from tracer import procedural, registry
-    from tracer.scene import manifest
+    from tracer.scenes import procedural, registry
+    from tracer.scenes.scene import manifest
 
     downloaded = {}
     if download:
@@ -124,8 +109,8 @@ def render_markdown(rep: dict) -> str:
 def main(ctx, args) -> int:
     rep = report(download=bool(getattr(args, "download", False)))
     outdir = os.path.join(getattr(args, "out", None) or "results", "models")
-    _atomic_write(os.path.join(outdir, "models.json"), json.dumps(rep, indent=2) + "\n")
-    _atomic_write(os.path.join(outdir, "summary.md"), render_markdown(rep))
+    atomic_write(os.path.join(outdir, "models.json"), json.dumps(rep, indent=2) + "\n", mode=0o644)
+    atomic_write(os.path.join(outdir, "summary.md"), render_markdown(rep), mode=0o644)
     if getattr(args, "json", False):
         print(json.dumps(rep))
     else:

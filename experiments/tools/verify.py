@@ -10,8 +10,8 @@ import time
 from experiments.core.common import add_scene_args, emit_json, parse_params, scene_from_args
 from experiments.core.common import progress
 from tracer.accel import build
-from tracer.oracle import compare, oracle_cached
-from tracer.rays import KINDS, make_rays
+from tracer.accel.oracle import compare, oracle_cached
+from tracer.scenes.rays import KINDS, make_rays
 
 
 def add_arguments(p) -> None:
@@ -66,8 +66,8 @@ def _many(args, kinds, structure: str) -> int:
     from pathlib import Path
 
     from experiments.core.store import atomic_write, git_commit, write_json
-    from tracer.scene import load_scene
-    from tracer.timing import host_info
+    from tracer.scenes.scene import load_scene
+    from tracer.measure.timing import host_info
     outs = []
     for name in progress(args.scene.split(","), f"verify {args.structure}", quiet=getattr(args, "json", False)):
         t0 = time.perf_counter()

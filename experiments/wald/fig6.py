@@ -23,10 +23,10 @@ from costmodel.packet import PacketCostFit, best_config
 from experiments.core.common import scene_list
 from experiments.core.store import atomic_write
 from experiments.core.common import progress
-from tracer.packet import CoherentGrid
-from tracer.rays import camera_rays
-from tracer.scene import load_scene
-from tracer.timing import set_threads, time_paired
+from tracer.accel.packet import CoherentGrid
+from tracer.scenes.rays import camera_rays
+from tracer.scenes.scene import load_scene
+from tracer.measure.timing import set_threads, time_paired
 
 LAMBDAS = (0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0)
 QUICK_LAMBDAS = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0)
@@ -81,7 +81,7 @@ def _row(scene, params: dict, cgt, rays, seconds: list, spread: float) -> dict:
 
 def measure_points(store, target: str, scene, param_list, side, repeats, threads, log) -> list[dict]:
     """Time every parameter set on one scene not in the point store yet: build all, then
-    ``repeats`` interleaved rounds (:func:`tracer.timing.time_paired`: a warm-up call
+    ``repeats`` interleaved rounds (:func:`tracer.measure.timing.time_paired`: a warm-up call
     first), so a burst of load on a shared machine hits every point alike; per point the median
     of the rounds. Camera rays in k x k tile order; the counted work of the same rays."""
     keys = [{"target": target, "scene": scene.name, "params": p, "side": side, "repeats": repeats,

@@ -19,9 +19,9 @@ from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
 from experiments.wald.fig6 import packet_work
 from experiments.wald.views import paired, wald_camera
-from tracer.packet import CoherentGrid
-from tracer.scene import load_scene
-from tracer.timing import build_clock, clock_name, time_call
+from tracer.accel.packet import CoherentGrid
+from tracer.scenes.scene import load_scene
+from tracer.measure.timing import build_clock, clock_name, time_call
 
 LARGEST = "dragon-871k"
 FAMILY = ["bunny-948", "bunny-3851", "bunny-16k", "bunny-69k", "dragon-11k", "dragon-48k", "dragon-202k", "dragon-871k"]

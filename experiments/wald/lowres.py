@@ -2,7 +2,7 @@
 resolution falls (issue 15; Wald et al. 2006 Sec 4.2: the packets' gain grows with resolution, and
 Fig 7's crossover is where packets stop paying). Camera rays side x side for several sides, one
 thread; CGT 8 x 8 (lambda = 5, macrocells 6), the uniform grid at the packet grid's resolution, and
-Embree (embreex, one thread), timed in interleaved rounds per side (:func:`tracer.timing.time_paired`),
+Embree (embreex, one thread), timed in interleaved rounds per side (:func:`tracer.measure.timing.time_paired`),
 ratios as medians of per-round ratios.
 
 Beside each point, the counted per-ray work of the packets (packets, slices, cells, ray-triangle
@@ -22,9 +22,9 @@ from experiments.wald.fig6 import model_X, packet_work, pooled_fit
 from experiments.wald.needs import needs_row
 from experiments.wald.views import paired, wald_camera
 from tracer.errors import GridcostError
-from tracer.grid import UniformGrid
-from tracer.packet import CoherentGrid
-from tracer.timing import clock_name
+from tracer.accel.grid import UniformGrid
+from tracer.accel.packet import CoherentGrid
+from tracer.measure.timing import clock_name
 
 #: the four meshes of issue 15's bench (its goals hold "on at least three of the four")
 SCENES = ["bunny-69k", "dragon-48k", "dragon-202k", "fandisk-x16"]
@@ -42,7 +42,7 @@ def add_arguments(p) -> None:
 
 
 def measure(scene, side: int, rounds: int) -> dict:
-    from tracer.reference import EmbreeAccel
+    from tracer.accel.reference import EmbreeAccel
     if not EmbreeAccel.available():
         raise GridcostError("wald-lowres compares with Embree: pip install 'gridcost[embree]'")
     rays = wald_camera(scene, side, 8)

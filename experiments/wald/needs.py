@@ -19,15 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracer._jit import jit
-from tracer.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box
+from tracer.accel._jit import jit
+from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box
 
 
 @jit
 def packet_needs(O, D, T, per, gp, nx, ny, nz, cell_start, tri_ids, ntri):
     """Per packet of ``per`` consecutive rays: (cell visits, distinct cells, references in the distinct
     cells, distinct triangles) of the rays' own walks through the grid (``gp``, n*, ``cell_start``, ``tri_ids`` of
-    :class:`tracer.grid.UniformGrid`), each walk ending at the ray's closest hit ``T`` (inf: a miss)."""
+    :class:`tracer.accel.grid.UniformGrid`), each walk ending at the ray's closest hit ``T`` (inf: a miss)."""
     m = O.shape[0]
     npk = (m + per - 1) // per
     out = np.zeros((npk, 4), np.int64)

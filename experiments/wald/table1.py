@@ -7,7 +7,7 @@ All three counts come from one counting traversal per scene (mailboxing and cull
 the hits, so they never change which cells the packet visits): every reference met (n/n), the
 first meeting of each triangle per packet (y/n), and those not rejected by the frustum (y/y) — each
 times the rays in the packet. Grid as in the paper: lambda = 5, triangles inserted by bounding box.
-Beside: the single-ray kd-tree of :mod:`tracer.kdtree` (tests per ray) where the paper lists its
+Beside: the single-ray kd-tree of :mod:`tracer.accel.kdtree` (tests per ray) where the paper lists its
 4 x 4 OpenRT kd-tree. Camera rays in 4 x 4 tile order at 1024 x 1024 (the paper's resolution).
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from experiments.core.common import add_image_args, dash
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
 from experiments.wald.views import paper_cell, scene_label, wald_camera
-from tracer.packet import CoherentGrid
+from tracer.accel.packet import CoherentGrid
 
 #: our scene, the paper's scene it stands in for, paper #tris, n/n, y/n, y/y (millions), kd-tree
 PAPER = [
@@ -54,7 +54,7 @@ def count_tests(scene, side: int, k: int, exact: bool, lam: float = 5.0, macro: 
 
 
 def kdtree_tests(scene, side: int) -> float:
-    from tracer.kdtree import KdTree
+    from tracer.accel.kdtree import KdTree
     rays = wald_camera(scene, side, 1)
     _, cnt = KdTree().build(scene).intersect(rays.origins, rays.directions)
     return float(cnt["tests"].mean())

@@ -4,10 +4,10 @@ packets, frames per second at 1024 x 1024 camera rays on one thread; the paper: 
 effect on visited cells, and Sec 4.7's shadow packets (rays from a point light to the primary hits,
 any-hit packets against the single-ray grid's any-hit query).
 
-All times of one scene come from one run of interleaved rounds (:func:`tracer.timing.time_paired`),
-ratios are medians of per-round ratios. Single ray: :class:`tracer.grid.UniformGrid` at the packet
+All times of one scene come from one run of interleaved rounds (:func:`tracer.measure.timing.time_paired`),
+ratios are medians of per-round ratios. Single ray: :class:`tracer.accel.grid.UniformGrid` at the packet
 grid's resolution (lambda = 5), with 2^k macrocells when they are faster on this scene (the paper's
-"using a macrocell hierarchy if advantageous"). Packets: :class:`tracer.packet.CoherentGrid`,
+"using a macrocell hierarchy if advantageous"). Packets: :class:`tracer.accel.packet.CoherentGrid`,
 lambda = 5, macrocells M = 6 (the paper's default) unless said otherwise. Only ray traversal is
 timed (no shading: the paper's fps include simple shading).
 """
@@ -23,9 +23,9 @@ from experiments.wald.fig6 import packet_work
 from experiments.wald.table4 import PAPER as PAPER4
 from experiments.wald.views import paper_cell as _p
 from experiments.wald.views import light_position, paired, scene_label, shadow_rays, wald_camera
-from tracer.grid import UniformGrid
-from tracer.packet import CoherentGrid
-from tracer.timing import clock_name
+from tracer.accel.grid import UniformGrid
+from tracer.accel.packet import CoherentGrid
+from tracer.measure.timing import clock_name
 
 #: the paper's Table 3 (frames per second at 1024², 1 thread): paper scene -> (single-ray, 8x8 packets, ratio)
 PAPER = {"ben": (1.57, 10.6, 6.75), "hand": (1.59, 16.1, 10.1), "toys": (1.53, 20.0, 13.1),

@@ -3,9 +3,9 @@ grid against 4 x 4 and 8 x 8 frustum packets on the same grid (identical dimensi
 The paper: packets visit 10-20x fewer cells (4 x 4) and 8-56x fewer (8 x 8), and — thanks to
 mailboxing and frustum culling — about as many or fewer triangle tests.
 
-Single rays: :class:`tracer.grid.UniformGrid` at the packet grid's resolution, bounding-box
+Single rays: :class:`tracer.accel.grid.UniformGrid` at the packet grid's resolution, bounding-box
 insertion like the packets (the paper's), with per-ray mailboxing (each triangle once per ray).
-Packets: :class:`tracer.packet.CoherentGrid` with mailboxing and frustum culling. Camera rays at
+Packets: :class:`tracer.accel.packet.CoherentGrid` with mailboxing and frustum culling. Camera rays at
 1024 x 1024 as in the paper (counts only, nothing is timed).
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ from experiments.core.target import begin, run_quiet
 from experiments.wald.table1 import count_tests
 from experiments.wald.views import paper_cell as _p
 from experiments.wald.views import scene_label, wald_camera
-from tracer.grid import UniformGrid
+from tracer.accel.grid import UniformGrid
 
 #: our scene, the paper's, then the paper's tests (M) single / 4x4 / 8x8, cells (M) single / 4x4 / 8x8,
 #: and its printed cell-ratio rows 4x4 / 8x8 (ben's printed 13.10 / 8.35 are not its counts' 8.35 / 17.7)

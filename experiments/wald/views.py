@@ -10,10 +10,10 @@ import dataclasses
 import numpy as np
 
 from experiments.core.common import dash
-from tracer.rays import Rays, bounding_sphere, camera_rays
-from tracer.timing import paired_ratio, time_paired
+from tracer.scenes.rays import Rays, bounding_sphere, camera_rays
+from tracer.measure.timing import paired_ratio, time_paired
 
-#: the room (tracer.procedural.room: 30 x 20 floor, furniture up to z = 1) is viewed from inside:
+#: the room (tracer.scenes.procedural.room: 30 x 20 floor, furniture up to z = 1) is viewed from inside:
 #: an eye at table height near one end, looking down the room along +x and slightly down
 ROOM_EYE = np.array([0.6, 10.0, 0.95])
 ROOM_LOOK = np.array([1.0, 0.15, -0.12])
@@ -22,7 +22,7 @@ ROOM_VIEW_R = 4.0
 
 
 def inside_view(scene, eye, look, radius):
-    """``scene`` with a ``view`` sphere placed so that :func:`tracer.rays.camera_frame` (45 degree
+    """``scene`` with a ``view`` sphere placed so that :func:`tracer.scenes.rays.camera_frame` (45 degree
     field of view) puts its eye at ``eye`` looking along ``look``; returns (scene, eye_dir)."""
     fwd = np.asarray(look, np.float64) / np.linalg.norm(look)
     dist = radius / np.sin(np.radians(45.0) / 2)

@@ -1,0 +1,67 @@
+"""The one Numba decorator configuration every kernel uses.
+
+``cache=True`` so compiled kernels survive between runs, ``fastmath=False`` so float semantics are
+IEEE (the oracle agreement depends on it), ``error_model='numpy'`` so 1/0 gives inf (slab tests)
+instead of raising.
+
+The cache lives in a folder named by the digest of every source file of ``tracer/``
+(:func:`tracer.measure.provenance.numba_cache_dir`): Numba invalidates a cached function only when its own
+file changes, while our kernels inline ``geometry.ray_triangle``, ``dda_setup`` and
+:func:`store_ray` from other files, so an edit to ``geometry.py`` could otherwise leave the grid
+running old machine code. Every kernel is decorated through :func:`jit` / :func:`pjit`, which point
+Numba at that folder at decoration time (when Numba picks a function's cache locator).
+"""
+from numba import config, njit
+
+from tracer.measure.provenance import numba_cache_dir
+
+CACHE_DIR = str(numba_cache_dir())
+_OPTIONS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
+
+
+def _decorate(options, args, kwargs):
+    config.CACHE_DIR = CACHE_DIR  # read by Numba's cache locator when the dispatcher is created
+    opts = {**options, **kwargs}
+    if len(args) == 1 and callable(args[0]):
+        return njit(**opts)(args[0])
+    return njit(*args, **opts)
+
+
+def jit(*args, **kwargs):
+    """``@jit`` or ``@jit(inline="always")``: njit with the project's options and cache folder."""
+    return _decorate(_OPTIONS, args, kwargs)
+
+
+def pjit(*args, **kwargs):
+    """:func:`jit` with ``parallel=True`` (kernels that ``prange`` over ray blocks)."""
+    return _decorate({**_OPTIONS, "parallel": True}, args, kwargs)
+
+
+#: rays per scheduling block. Batched kernels run ``for th in prange(T)`` (T = get_num_threads())
+#: and thread ``th`` takes blocks th, th + T, th + 2T, ... (``range(th, nblocks(m), T)``): Numba's
+#: prange hands each thread one contiguous slice, and a camera image's halves cost different
+#: amounts (1.3x on bunny-69k), so contiguous halves scaled 1.67x on 2 threads; interleaved blocks
+#: keep the rays of a block coherent and balance the load.
+BLOCK = 256
+
+
+@jit(inline="always")
+def nblocks(m):
+    """Number of BLOCK-ray blocks covering m rays."""
+    return (m + BLOCK - 1) // BLOCK
+
+
+@jit(inline="always")
+def store_ray(out_t, out_id, counters, i, t, tid, setups, steps, tests, nodes, skips, occupied=0, jumps=0):
+    """Write ray i's result and, when ``counters`` is an array (not None), its counters in the
+    column order of :data:`tracer.accel.COUNTER_NAMES`."""
+    out_t[i] = t
+    out_id[i] = tid
+    if counters is not None:
+        counters[i, 0] = setups
+        counters[i, 1] = steps
+        counters[i, 2] = tests
+        counters[i, 3] = nodes
+        counters[i, 4] = skips
+        counters[i, 5] = occupied
+        counters[i, 6] = jumps

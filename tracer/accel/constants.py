@@ -1,0 +1,27 @@
+"""Cost constants and defaults taken from the papers, each with its source. One place for all of them."""
+
+#: Ize, Shirley & Parker 2007, Sec. 2.2: "Ti/Ts ~ 4" on their machine, hence M = 8N (Eq 4).
+IZE_TI_OVER_TS = 4.0
+#: Ize 2007 Sec. 4: two-level grid M1 = (8N)^(3/5) (Eq 12 with 2k^2 Ti/Ts folded to 8), M2 = 8 N2.
+IZE_M_FACTOR = 8.0
+IZE_M1_EXPONENT = 0.6
+
+#: pbrt-v2 GridAccel (Chuang 2006 slides): voxels along the longest axis = 3 N^(1/3), clamped at 64.
+PBRT_GRID_VOXELS_PER_CUBE_ROOT = 3.0
+PBRT_GRID_MAX_VOXELS = 64
+
+#: pbrt-v2 KdTreeAccel SAH (Chuang 2006 slides): isect cost 80, traversal cost 1, empty bonus 0.5,
+#: max depth 8 + 1.3 log2 N, max primitives per leaf 1.
+PBRT_KD_ISECT_COST = 80.0
+PBRT_KD_TRAVERSAL_COST = 1.0
+PBRT_KD_EMPTY_BONUS = 0.5
+PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B = 8.0, 1.3
+PBRT_KD_MAX_PRIMS = 1
+
+#: Wald et al. 2006 (coherent grid traversal) Sec. 3: n_x = d_x (lambda N / V)^(1/3), lambda = 5; macrocell 6.
+WALD_LAMBDA = 5.0
+WALD_MACROCELL = 6
+
+#: Hapala, Karlik & Havran 2011, Sec. 4: R_C = T_B^H / (t_R^G (1 + eps) - t_R^H), eps = 0.01.
+HAPALA_EPS = 0.01
+

@@ -1,0 +1,410 @@
+"""Uniform grid: resolution rules, exact (or bounding-box) triangle assignment in CSR form,
+3D-DDA traversal with early termination, optional mailboxing and per-ray counters.
+
+Layout (flat arrays, no Python objects): ``cell_start_`` (M + 1, int32) and ``tri_ids_`` (refs,
+int32) in CSR form, and ``tri_verts_`` float32 rows of 9: the triangles copied into cell order (one
+row per reference, read contiguously), or for long skinny triangles one row per triangle (see
+:func:`choose_layout`).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numba
+import numpy as np
+from numba import prange
+
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel import COUNTER_NAMES, Accel
+from tracer.accel.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
+from tracer.errors import GridcostError
+from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle, tri_box_overlap
+from tracer.measure.memory import cache_bytes, check_budget, working_set
+
+#: direct-mapped mailbox entries per thread (power of two)
+MAILBOX = 32
+#: relative enlargement of cells in the overlap test, so rounding never drops a touching triangle
+CELL_EPS = 1e-5
+NCOUNT = len(COUNTER_NAMES)
+#: bytes of one row of ``tri_verts_`` (three float32 vertices)
+TRI_ROW_BYTES = 9 * 4
+
+
+# ---------------------------------------------------------------- resolution rules
+def res_from_cells(bounds, cells: float) -> np.ndarray:
+    """Ize 2007 Sec 2.2: a grid of about ``cells`` cells, each as close to a cube as the bounds allow."""
+    ext = np.maximum(np.asarray(bounds[1], float) - np.asarray(bounds[0], float), 1e-30)
+    side = (float(np.prod(ext)) / max(float(cells), 1.0)) ** (1.0 / 3.0)
+    return np.maximum(1, np.round(ext / side)).astype(np.int64)
+
+
+def res_pbrt(bounds, n_tris: int, clamp: bool = True) -> np.ndarray:
+    """pbrt-v2 GridAccel: 3 N^(1/3) voxels along the longest axis (clamped at 64), cubical voxels."""
+    ext = np.asarray(bounds[1], float) - np.asarray(bounds[0], float)
+    per_unit = PBRT_GRID_VOXELS_PER_CUBE_ROOT * n_tris ** (1.0 / 3.0) / ext.max()
+    res = np.maximum(1, np.floor(ext * per_unit + 0.5)).astype(np.int64)  # pbrt's Round2Int
+    return np.minimum(res, PBRT_GRID_MAX_VOXELS) if clamp else res
+
+
+def res_wald(bounds, n_tris: int, lam: float = WALD_LAMBDA) -> np.ndarray:
+    """Wald et al. 2006 Sec 3: n_x = d_x (lambda N / V)^(1/3)."""
+    ext = np.maximum(np.asarray(bounds[1], float) - np.asarray(bounds[0], float), 1e-30)
+    k = (lam * n_tris / float(np.prod(ext))) ** (1.0 / 3.0)
+    return np.maximum(1, np.round(ext * k)).astype(np.int64)
+
+
+def choose_layout(layout: str, n_tris: int, refs: int) -> str:
+    """Where a cell's triangle vertices are read from. "copy": duplicated into cell order (36 B per
+    reference, read contiguously); "index": one row per triangle reached through the reference's id.
+    "auto" takes "index" when the triangles fit in L2 but their cell-order copy does not — long
+    skinny triangles, referenced by tens of cells each (cylinder-3996 at 132k cells: 343 against
+    561 ns per random ray); compact meshes keep the copy (bunny-69k at 8N: index 9 % slower)."""
+    if layout != "auto":
+        return layout
+    l2 = cache_bytes(2)
+    return "index" if n_tris * TRI_ROW_BYTES <= l2 < refs * TRI_ROW_BYTES else "copy"
+
+
+def grid_params(bounds, res) -> np.ndarray:
+    """The float64 parameter vector the kernels take: origin, cell size, inverse cell size, bounds max."""
+    lo = np.asarray(bounds[0], np.float64)
+    hi = np.asarray(bounds[1], np.float64)
+    cell = (hi - lo) / np.asarray(res, np.float64)
+    return np.concatenate([lo, cell, 1.0 / cell, hi])
+
+
+# ---------------------------------------------------------------- build
+@jit
+def _cell_range(lo, hi, g0, ic, n):
+    i0 = int(math.floor((lo - g0) * ic - CELL_EPS))
+    i1 = int(math.floor((hi - g0) * ic + CELL_EPS))
+    return max(i0, 0), min(i1, n - 1)
+
+
+@jit
+def grid_assign(tris, gp, nx, ny, nz, exact, cell_start, tri_ids, fill):
+    """Assign triangles to cells: count pass (``fill=False``: counts into cell_start[c + 1]) or fill
+    pass (``fill=True``: cell_start[c + 1] holds cell c's start, :func:`starts_shifted`, and is used
+    as its write cursor, so after the pass cell_start[c + 1] is cell c's end: the prefix sum, with no
+    cursor array). tri_ids are filled in triangle order per cell. Candidate cells come from the
+    triangle's bounds; ``exact`` keeps only cells the triangle overlaps (separating-axis test against
+    the cell enlarged by CELL_EPS). Returns the number of references (int64: the count pass may
+    exceed the int32 range, which the caller refuses)."""
+    hx = 0.5 * gp[3] * (1.0 + 2 * CELL_EPS)
+    hy = 0.5 * gp[4] * (1.0 + 2 * CELL_EPS)
+    hz = 0.5 * gp[5] * (1.0 + 2 * CELL_EPS)
+    refs = np.int64(0)
+    for t in range(tris.shape[0]):
+        ax = np.float64(tris[t, 0, 0]); ay = np.float64(tris[t, 0, 1]); az = np.float64(tris[t, 0, 2])
+        bx = np.float64(tris[t, 1, 0]); by = np.float64(tris[t, 1, 1]); bz = np.float64(tris[t, 1, 2])
+        cx = np.float64(tris[t, 2, 0]); cy = np.float64(tris[t, 2, 1]); cz = np.float64(tris[t, 2, 2])
+        x0, x1 = _cell_range(min(ax, bx, cx), max(ax, bx, cx), gp[0], gp[6], nx)
+        y0, y1 = _cell_range(min(ay, by, cy), max(ay, by, cy), gp[1], gp[7], ny)
+        z0, z1 = _cell_range(min(az, bz, cz), max(az, bz, cz), gp[2], gp[8], nz)
+        single = x0 == x1 and y0 == y1 and z0 == z1
+        for k in range(z0, z1 + 1):
+            for j in range(y0, y1 + 1):
+                for i in range(x0, x1 + 1):
+                    if exact and not single:
+                        if not tri_box_overlap(gp[0] + (i + 0.5) * gp[3], gp[1] + (j + 0.5) * gp[4],
+                                               gp[2] + (k + 0.5) * gp[5], hx, hy, hz,
+                                               ax, ay, az, bx, by, bz, cx, cy, cz):
+                            continue
+                    c = i + nx * (j + ny * k)
+                    if fill:
+                        tri_ids[cell_start[c + 1]] = t
+                        cell_start[c + 1] += 1
+                    else:
+                        cell_start[c + 1] += 1
+                    refs += 1
+    return refs
+
+
+@jit
+def starts_shifted(cell_start):
+    """Counts in cell_start[c + 1] -> cell c's start in cell_start[c + 1] (an exclusive prefix sum
+    one place to the right), in place: the fill pass of :func:`grid_assign` advances it to the end."""
+    s = 0
+    for c in range(cell_start.shape[0] - 1):
+        n = cell_start[c + 1]
+        cell_start[c + 1] = s
+        s += n
+
+
+@jit
+def occupancy_bits(cell_start, out):
+    """Bit c of ``out`` (little-endian within each byte, as ``np.packbits(..., bitorder='little')``)
+    set where cell c holds a triangle; ``out`` zeroed, (ncell + 7) // 8 bytes."""
+    for c in range(cell_start.shape[0] - 1):
+        if cell_start[c + 1] > cell_start[c]:
+            out[c >> 3] |= np.uint8(1 << (c & 7))
+
+
+#: bytes a grid build holds per cell (int32 cell_start + occupancy bit), per reference (int32 id)
+#: and per copied reference (9 float32 vertices, "copy" layout); :func:`grid_build_bytes`
+BUILD_BYTES_PER_CELL = 4 + 1 / 8
+BUILD_BYTES_PER_REF = 4
+
+
+def grid_build_bytes(ncell: int, refs: int, n: int, layout: str = "copy", macro: int = 0) -> int:
+    """Peak bytes a grid build allocates (cell array, occupancy bits, reference ids, vertex rows in
+    cell order or one per triangle, and with macrocells the block occupancy pass: an int32 diff,
+    two bool arrays); checked against the measured peak by tests/test_memory.py."""
+    b = ncell * BUILD_BYTES_PER_CELL + refs * BUILD_BYTES_PER_REF + (refs if layout == "copy" else n) * TRI_ROW_BYTES
+    if macro:
+        b += ncell * (4 + 1 + 1)
+    return int(b + 4)
+
+
+# ---------------------------------------------------------------- traversal
+@jit(inline="always")
+def _block_exit(o, d, lo, bsize, b):
+    """t where the ray leaves block ``b`` (of size ``bsize``) along one axis."""
+    if d > 0.0:
+        return (lo + (b + 1) * bsize - o) / d
+    if d < 0.0:
+        return (lo + b * bsize - o) / d
+    return INF
+
+
+@jit(inline="always")
+def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
+             cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None, tvi=None):
+    """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
+
+    Returns (t, tri_id, setups, steps, tests, skips, jumps, occupied); ``occupied`` counts the
+    visited cells that hold at least one reference (the steps that load a reference list). ``mb`` is the (chunks, MAILBOX) mailbox
+    array or None (mailboxing compiled out). ``macro`` is the macrocell occupancy (blocks of
+    2^mshift cells per axis, uint8, x fastest) or None: entering a cell of an empty block, the ray
+    jumps to the block's exit and the DDA is set up again there."""
+    t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, tmax)
+    if t0 > t1:
+        return INF, -1, 0, 0, 0, 0, 0, 0
+    ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
+        ox, oy, oz, dx, dy, dz, t0, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
+        gp[6], gp[7], gp[8], nx, ny, nz)
+    if mb is not None:
+        for h in range(MAILBOX):
+            mb[chunk, h] = -1
+    # the cell index moves by a signed stride per axis; l* counts the cells left before the ray
+    # leaves the grid on that axis (replaces two bounds checks and the index multiply per step)
+    c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz)
+    # best starts at tmax: leaving a cell at t >= best (hit found, or beyond tmax) ends the ray
+    best = np.float64(tmax)
+    best_ref = -1
+    steps = 0
+    tests = 0
+    skips = 0
+    jumps = 0
+    occupied = 0
+    tjump = -INF
+    bnx = ((nx - 1) >> mshift) + 1
+    bny = ((ny - 1) >> mshift) + 1
+    while True:
+        if macro is not None:
+            bx = ix >> mshift
+            by = iy >> mshift
+            bz = iz >> mshift
+            if macro[bx + bnx * (by + bny * bz)] == 0:
+                k = float(1 << mshift)
+                te = min(_block_exit(ox, dx, gp[0], gp[3] * k, bx), _block_exit(oy, dy, gp[1], gp[4] * k, by),
+                         _block_exit(oz, dz, gp[2], gp[5] * k, bz))
+                if best <= te or te > t1:
+                    break
+                if te > tjump:  # a jump that makes no progress falls back to ordinary steps
+                    tjump = te
+                    jumps += 1
+                    ix, iy, iz, sx, sy, sz, tnx, tny, tnz, tdx, tdy, tdz = dda_setup(
+                        ox, oy, oz, dx, dy, dz, te, gp[0], gp[1], gp[2], gp[3], gp[4], gp[5],
+                        gp[6], gp[7], gp[8], nx, ny, nz)
+                    c, lx, ly, lz, cdx, cdy, cdz = dda_cursor(ix, iy, iz, sx, sy, sz, nx, ny, nz)
+                    continue
+        cu = np.uintp(c)
+        steps += 1
+        if occ is None:
+            r0 = cell_start[cu]
+            r1 = cell_start[cu + np.uintp(1)]
+        else:
+            r0 = 0
+            r1 = 0
+            if (occ[cu >> np.uintp(3)] >> (cu & np.uintp(7))) & 1:
+                r0 = cell_start[cu]
+                r1 = cell_start[cu + np.uintp(1)]
+        if r1 > r0:
+            occupied += 1
+        for r in range(r0, r1):
+            ru = np.uintp(r)
+            if mb is not None:
+                tid = tri_ids[ru]
+                h = tid & (MAILBOX - 1)
+                if mb[chunk, h] == tid:
+                    skips += 1
+                    continue
+                mb[chunk, h] = tid
+            tests += 1
+            if tvi is None:  # "copy" layout: vertices stored in cell order, row = reference
+                row = ru
+            else:  # "index" layout: one row per triangle, reached through the reference's id
+                row = np.uintp(tvi[ru])
+            t = ray_triangle(ox, oy, oz, dx, dy, dz,
+                             tv[row, 0], tv[row, 1], tv[row, 2], tv[row, 3], tv[row, 4], tv[row, 5],
+                             tv[row, 6], tv[row, 7], tv[row, 8], tmin, best)
+            if t < best:
+                best = t
+                best_ref = r
+                if anyhit:
+                    return best, tri_ids[ru], 1, steps, tests, skips, jumps, occupied
+        # leave the cell through its nearest plane (stops at a hit before it, or at the grid's end)
+        axis, c, lx, ly, lz, tnx, tny, tnz, _ = dda_step(c, lx, ly, lz, cdx, cdy, cdz, tnx, tny, tnz,
+                                                         tdx, tdy, tdz, best, INF)
+        if axis < 0:
+            break
+        if macro is not None:  # the macrocell test needs the cell coordinates
+            if axis == 0:
+                ix += sx
+            elif axis == 1:
+                iy += sy
+            else:
+                iz += sz
+    if best_ref < 0:
+        return INF, -1, 1, steps, tests, skips, jumps, occupied
+    return best, tri_ids[np.uintp(best_ref)], 1, steps, tests, skips, jumps, occupied
+
+
+@pjit
+def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
+               out_t, out_id, counters, mb, macro, mshift, occ, tvi, nt):
+    """Batched grid traversal: ``prange`` over the ``nt`` threads, each taking every nt-th block of
+    BLOCK rays (see :data:`tracer.accel._jit.BLOCK`). ``counters`` and ``mb`` (one mailbox row per thread)
+    are arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
+    m = O.shape[0]
+    for th in prange(nt):
+        for b in range(th, nblocks(m), nt):
+            for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
+                t, tid, su, st, te, sk, ju, oc = grid_ray(
+                    np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
+                    np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
+                    anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ, tvi)
+                store_ray(out_t, out_id, counters, i, t, tid, su, st, te, 0, sk, oc, ju)
+
+
+def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
+    """uint8 occupancy of k x k x k blocks of cells (x fastest), 1 where any cell holds a triangle."""
+    nx, ny, nz = (int(r) for r in res)
+    occ = (np.diff(cell_start) > 0).reshape(nz, ny, nx)
+    bx, by, bz = -(-nx // k), -(-ny // k), -(-nz // k)
+    pad = np.zeros((bz * k, by * k, bx * k), bool)
+    pad[:nz, :ny, :nx] = occ
+    return np.ascontiguousarray(pad.reshape(bz, k, by, k, bx, k).any(axis=(1, 3, 5)).astype(np.uint8).ravel())
+
+
+def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0):
+    """The grid build shared by the one-level grid and the packet grid: count references per cell
+    into an int32 array, turn the counts into starts in place, fill the ids (the starts advance to
+    the ends: no cursor array), copy vertex rows per ``layout`` ("auto" through :func:`choose_layout`)
+    and set the occupancy bits. The memory guard checks :func:`grid_build_bytes` before allocating
+    (before counting with one reference per triangle, after counting with the real count).
+    Returns (cell_start, tri_ids, tri_verts, occupancy bits, layout)."""
+    ncell = int(np.prod(res))
+    what = f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}"
+    if ncell >= 2**31:
+        raise GridcostError(f"{what}: over the int32 cell index range")
+    check_budget(what, grid_build_bytes(ncell, scene.n, scene.n, "copy", macro))
+    nx, ny, nz = (int(r) for r in res)
+    cell_start = np.zeros(ncell + 1, dtype=np.int32)  # counts, then starts, then ends (grid_assign)
+    refs = int(grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, np.zeros(0, np.int32), False))
+    if refs >= 2**31:
+        raise GridcostError(f"{what}: {refs:,} triangle references exceed the int32 index range")
+    layout = choose_layout(layout, scene.n, refs)
+    check_budget(f"{what} with {refs:,} triangle references", grid_build_bytes(ncell, refs, scene.n, layout, macro))
+    starts_shifted(cell_start)
+    tri_ids = np.empty(refs, dtype=np.int32)
+    grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, tri_ids, True)
+    tv = scene.tris.reshape(-1, 9)
+    tri_verts = np.ascontiguousarray(tv if layout == "index" else tv[tri_ids])
+    occ = np.zeros((ncell + 7) // 8, np.uint8)
+    occupancy_bits(cell_start, occ)
+    return cell_start, tri_ids, tri_verts, occ, layout
+
+
+class UniformGrid(Accel):
+    """One-level uniform grid (Ize 2007 Sec 2; pbrt-v2 GridAccel).
+
+    Resolution: ``cells`` (total cell count M, near-cubical cells), or ``rule='pbrt'`` (3 N^(1/3)
+    along the longest axis, ``clamp`` at 64), or ``rule='wald'`` (lambda), or an explicit ``res``.
+    ``exact`` selects triangle/box overlap (default) vs bounding-box assignment; ``mailbox`` turns
+    on per-ray mailboxing; ``macro`` = K > 0 adds an empty-space-skipping layer of K^3-cell blocks
+    (K a power of two; counter "jumps").
+    """
+
+    name = "grid"
+    counter_fields = {"setups": "1 per ray entering the grid", "steps": "cells stepped",
+                      "tests": "ray/triangle tests", "skips": "tests skipped by the mailbox",
+                      "occupied": "stepped cells holding a reference", "jumps": "macrocell jumps"}
+
+    def __init__(self, cells=None, res=None, rule=None, lam=WALD_LAMBDA, clamp=True, exact=True,
+                 mailbox=False, factor=None, macro=0, layout="auto"):
+        if layout not in ("auto", "copy", "index"):
+            raise GridcostError(f"grid layout must be 'auto', 'copy' or 'index', got {layout!r}")
+        self.layout = layout
+        self.cells, self.res, self.rule, self.lam = cells, res, rule, lam
+        self.clamp, self.exact, self.mailbox, self.factor = clamp, exact, mailbox, factor
+        if macro and (int(macro) & (int(macro) - 1)):
+            raise GridcostError(f"macrocell size must be a power of two, got {macro}")
+        self.macro = int(macro or 0)
+
+    def _resolution(self, scene) -> np.ndarray:
+        if self.res is not None:
+            res = np.asarray(self.res, np.int64)
+        elif self.rule == "pbrt":
+            res = res_pbrt(scene.bounds, scene.n, self.clamp)
+        elif self.rule == "wald":
+            res = res_wald(scene.bounds, scene.n, self.lam)
+        else:
+            cells = self.cells if self.cells is not None else (self.factor or 8.0) * scene.n
+            if not np.isfinite(cells) or cells < 1:
+                raise GridcostError(f"grid cell count must be a positive number, got {cells}")
+            res = res_from_cells(scene.bounds, cells)
+        if res.shape != (3,) or (res < 1).any():
+            raise GridcostError(f"grid resolution must be three positive integers, got {res}")
+        return res
+
+    def build(self, scene):
+        res = self._resolution(scene)
+        t_start = time.perf_counter()
+        gp = grid_params(scene.bounds, res)
+        cell_start, tri_ids, tri_verts, occ, layout = fill_cells(scene, res, gp, self.exact, self.layout, self.macro)
+        refs = len(tri_ids)
+        self.cell_start_, self.tri_ids_, self.tri_verts_, self.occ_, self.layout_ = cell_start, tri_ids, tri_verts, occ, layout
+        self.mshift_ = int(self.macro).bit_length() - 1 if self.macro else 0
+        self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.res_, self.gp_, self.n_, self.refs_ = res, gp, scene.n, refs
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        m = len(o)
+        out_t, out_id, cnt = self._outputs(m, count)
+        mb = np.empty((numba.get_num_threads(), MAILBOX), np.int32) if self.mailbox else None
+        nx, ny, nz = (int(r) for r in self.res_)
+        grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
+                   self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_,
+                   self.tri_ids_ if self.layout_ == "index" else None, numba.get_num_threads())
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        ncell = int(np.prod(self.res_))
+        occ = np.diff(self.cell_start_)
+        return {
+            "structure": "grid", "res": [int(r) for r in self.res_], "cells": ncell,
+            "refs": int(self.refs_), "refs_per_tri": self.refs_ / max(self.n_, 1),
+            "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
+            "working_set": working_set(self.cell_start_.nbytes + self.occ_.nbytes, self.tri_ids_.nbytes,
+                                       self.tri_verts_.nbytes),
+            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
+                                + self.occ_.nbytes),
+            "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,
+            "macro": self.macro, "layout": self.layout_,
+        }

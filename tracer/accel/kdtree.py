@@ -1,0 +1,429 @@
+"""SAH kd-tree as pbrt-v2's ``KdTreeAccel`` builds it, and pbrt's front-to-back traversal.
+
+Build (Numba, O(N log N)): pbrt-v2's sorted-edge sweep, with the sort done once. The 2N bound
+edges of every axis are sorted once at the root (key: t, then START before END, as pbrt's
+``BoundEdge::operator<``); a node's three edge lists are stable-filtered into its children, so
+every node sees its edges already sorted and the per-node work is linear (pbrt re-sorts at every
+node: O(N log^2 N), same trees). Per node, exactly as pbrt-v2:
+
+* leaf when ``n <= max_prims`` or the depth budget is spent (max depth
+  ``round(8 + 1.3 * floor(log2 N))`` — pbrt's ``Log2Int`` is the floor);
+* SAH sweep over the edges strictly inside the node along the axis of largest extent; the other
+  two axes are tried (``retries``) only when that axis has no candidate plane;
+  cost = traversal + isect * (1 - bonus) * (pB nB + pA nA), bonus = ``empty_bonus`` when a side is
+  empty (80 / 1 / 0.5 by default, :mod:`tracer.accel.constants`);
+* ``bad_refines`` counts splits costlier than the leaf (isect * n); leaf when the best cost is
+  > 4 x leaf cost with n < 16, or no plane, or the third bad refine;
+* primitives with a START edge before the split edge go below, those with an END edge after it
+  go above (straddlers, and triangles lying in the plane, go to one or both sides so that every
+  triangle is on each side it touches). Triangles are not clipped: edges are their full bounds.
+
+``clip=True`` builds with perfect splits on triangles clipped to each node instead
+(:mod:`tracer.accel.kdtree_clip`, Wald & Havran 2006); same node layout and traversal.
+
+Layout: pbrt's depth-first order with the below child at ``i + 1``, minus the empty leaves (a
+third of pbrt's leaves; they are counted as visited, not stored). ``nodes_`` (stored nodes, 2)
+int32: interior ``[axis | flag << 2 | child << 4, split (float32 bits)]`` with flag 0: below at
+``i + 1``, above at ``child``; 1: below is an empty leaf, above at ``i + 1``; 2: above is an empty
+leaf, below at ``i + 1``. Leaf ``[3 | count << 2, x]``: x is the triangle's index itself in a
+one-triangle leaf (most leaves: max_prims = 1), else the offset of the leaf's refs in ``tri_ids_``.
+``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's triangle
+indices in leaf order and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
+ref (9+ refs per triangle at max_prims = 1 would not fit in L2 where the scene's triangles do).
+By default (``leaf_order=True``; False keeps scene order) the triangles are stored in the order the leaves first reference them
+(:func:`leaf_first_order`), so the triangles of neighbouring leaves share cache lines; the kernel
+then returns stored indices and ``_trace`` maps them back to the scene's through ``tri_order_``
+(8-16 % less time per random ray on bunny-69k / dragon-202k, paired, one thread).
+
+Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
+per block of BLOCK rays); a popped node whose t-range starts after the closest hit is skipped
+(pbrt stops there, but the stack is not ordered by entry t: a ray lying in a split plane pushes
+the above child with the parent's whole t-range, beneath entries of the below subtree that start
+later — stopping lost nearer hits there, e.g. on meshes far from the origin, where float32 rays
+often lie exactly in split planes); the any-hit variant (``IntersectP``) stops at the first hit.
+The near/far choice is branch-free (cmov: branches mispredict on random rays), the ray's
+origin / direction / inverse direction are read from a 9-entry per-block array indexed by the split
+axis, and each interior node prefetches its far (above) child, whose dependent load otherwise
+misses L2 on large trees. Without counters, an empty child is never pushed (visiting it only
+counts). The ray is widened to float64 with ``np.float64`` (Numba's
+``float()`` keeps a float32 a float32) and passed to :func:`tracer.accel.geometry.ray_triangle` exactly
+as the grid and the oracle pass it, so a hit's t is bit-identical to the oracle's.
+Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
+widened by ``tol`` = T_EPS (2e-6) of the ray's t scale, so rounding can only add node visits,
+never lose a hit — including hits that ray_triangle accepts on a triangle's very edge.
+Counters: ``setups`` 1 per ray meeting the root box, ``steps`` leaves visited (empty ones too),
+``tests`` triangle tests, ``nodes`` nodes visited (interior + leaf) — pbrt's visits exactly.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from llvmlite import ir
+from numba import prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
+from tracer.accel.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
+                              PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
+from tracer.errors import GridcostError
+from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
+from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
+from tracer.accel.kdtree_clip import kd_build_clip
+from tracer.measure.memory import check_budget, working_set
+
+NCOUNT = len(COUNTER_NAMES)
+
+
+def pbrt_max_depth(n: int) -> int:
+    """pbrt-v2: ``Round2Int(8 + 1.3f * Log2Int(float(N)))`` with Log2Int = floor(log2)."""
+    lg = math.floor(math.log2(n)) if n >= 1 else 0
+    return int(math.floor(PBRT_KD_DEPTH_A + PBRT_KD_DEPTH_B * lg + 0.5))
+
+
+# ---------------------------------------------------------------- traversal
+@intrinsic
+def prefetch(typingctx, arr, idx):
+    """``prefetch(a, i)``: hint the CPU to load the cache line of ``a.ravel()[i]`` (LLVM's
+    ``llvm.prefetch``, read, high locality). Never faults, also for an index past the end."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]), "llvm.prefetch.p0")
+        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+    return sig, codegen
+
+
+@jit(inline="always")
+def _slab_clip(lo, hi, o, inv, t0, t1):
+    """Clip [t0, t1] to one slab of the root box (float64; a NaN product is ignored)."""
+    a = (lo - o) * inv
+    b = (hi - o) * inv
+    if a > b:
+        a, b = b, a
+    if a > t0:
+        t0 = a
+    if b < t1:
+        t1 = b
+    return t0, t1
+
+
+@jit
+def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+             out_t, out_id, counters):
+    """Trace rays lo..hi-1 (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when ``anyhit``) with one
+    todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array."""
+    rs = np.empty(9, np.float64)  # origin, direction, inverse direction, indexed by axis
+    sn = np.empty(stack_size, np.int32)
+    s0 = np.empty(stack_size, np.float64)
+    s1 = np.empty(stack_size, np.float64)
+    bx0 = box[0]
+    by0 = box[1]
+    bz0 = box[2]
+    bx1 = box[3]
+    by1 = box[4]
+    bz1 = box[5]
+    one = np.uintp(1)
+    for i in range(lo, hi):
+        ox, oy, oz, dx, dy, dz, ix, iy, iz = load_ray(O, D, i)
+        best = np.float64(tmax[i])
+        best_id = -1
+        nvis = 0
+        leaves = 0
+        tests = 0
+        # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
+        t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, best)
+        t0, t1 = _slab_clip(by0, by1, oy, iy, t0, t1)
+        t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
+        in_box = t0 <= t1
+        if in_box:
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
+            rs[0] = ox
+            rs[1] = oy
+            rs[2] = oz
+            rs[3] = dx
+            rs[4] = dy
+            rs[5] = dz
+            rs[6] = ix
+            rs[7] = iy
+            rs[8] = iz
+            sp = 0
+            node = 0
+            ntmin = t0
+            ntmax = t1
+            while True:
+                # descend from ``node`` to a leaf, front to back
+                while node >= 0:
+                    nvis += 1
+                    nu = np.uintp(2 * node)
+                    w = nodes[nu]
+                    axis = w & 3
+                    if axis == LEAF:
+                        break
+                    # the above child is far away in memory: start loading it now (w >> 4 is 0
+                    # when a child is an empty leaf, a harmless hint)
+                    prefetch(nodes, np.uintp(2 * (w >> 4)))
+                    split = np.float64(nodes_f[nu + one])
+                    fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
+                    below = -1 if fl == 1 else node + 1
+                    above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
+                    au = np.uintp(axis)
+                    o = rs[au]
+                    d = rs[au + np.uintp(3)]
+                    inv = rs[au + np.uintp(6)]
+                    if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
+                        if o < split:
+                            node = below
+                        elif o > split:
+                            node = above
+                        else:
+                            spu = np.uintp(sp)
+                            sn[spu] = above
+                            s0[spu] = ntmin
+                            s1[spu] = ntmax
+                            sp += 1
+                            node = below
+                        continue
+                    tp = (split - o) * inv
+                    neg = d < 0.0
+                    first = above if neg else below
+                    second = below if neg else above
+                    lo_tp = tp - tol
+                    hi_tp = tp + tol
+                    only_first = lo_tp > ntmax
+                    only_second = hi_tp < ntmin
+                    both = not (only_first or only_second)
+                    # branch-free: always write the todo entry, keep it only when both (and,
+                    # without counters, only when it is not an empty leaf: visiting one only counts)
+                    spu = np.uintp(sp)
+                    sn[spu] = second
+                    s0[spu] = max(ntmin, lo_tp)
+                    s1[spu] = ntmax
+                    keep = both and (counters is not None or second >= 0)
+                    sp += 1 if keep else 0
+                    node = second if only_second else first
+                    ntmax = min(ntmax, hi_tp) if both else ntmax
+                if node < 0:
+                    nvis += 1
+                    leaves += 1  # an empty leaf: visited as pbrt does, but not stored
+                else:
+                    leaves += 1
+                    cnt = w >> 2
+                    x = nodes[nu + one]
+                    if cnt == 1:  # single-triangle leaf: the triangle's index inline
+                        r = np.uintp(x)
+                        tests += 1
+                        t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                                         tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
+                                         tmin, best)
+                        if t < best:
+                            best = t
+                            best_id = x
+                            if anyhit:
+                                break
+                    else:
+                        done = False
+                        for rr in range(x, x + cnt):
+                            tid = ids[np.uintp(rr)]
+                            r = np.uintp(tid)
+                            tests += 1
+                            t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
+                                             tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7],
+                                             tv[r, 8], tmin, best)
+                            if t < best:
+                                best = t
+                                best_id = tid
+                                if anyhit:
+                                    done = True
+                                    break
+                        if done:
+                            break
+                # pop the next pending node; one that starts after the closest hit is skipped,
+                # not a stop: the todo stack is not ordered by entry t. A ray in a split plane
+                # (d == 0, o == split) pushes the above child with the parent's whole range,
+                # under the entries the below child's subtree pushes later with larger entry t;
+                # and tol lets a child's entry t exceed its sibling's.
+                node = -2
+                while sp > 0:
+                    sp -= 1
+                    spu = np.uintp(sp)
+                    ntmin = s0[spu]
+                    if not best < ntmin - tol:
+                        node = sn[spu]
+                        ntmax = s1[spu]
+                        break
+                if node == -2:
+                    break
+        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
+                  leaves, tests, nvis, 0)
+
+
+@pjit
+def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+             out_t, out_id, counters, nt):
+    """Batched kd-tree traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer.accel._jit.BLOCK`), one todo stack per block.
+    ``counters`` is an (m, 5) int32 array or None (None compiles the variant without counting)."""
+    m = O.shape[0]
+    for th in prange(nt):
+        for b in range(th, nblocks(m), nt):
+            kd_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, nodes,
+                     nodes_f, tv, ids, stack_size, out_t, out_id, counters)
+
+
+def root_box(scene) -> np.ndarray:
+    """The traversal's root box: the scene bounds joined with the triangles' bounds, padded by
+    1e-5 of the largest extent so rays through boundary vertices meet it despite rounding."""
+    v = scene.tris.reshape(-1, 3).astype(np.float64)
+    lo = np.minimum(v.min(axis=0), scene.bounds[0].astype(np.float64))
+    hi = np.maximum(v.max(axis=0), scene.bounds[1].astype(np.float64))
+    pad = 1e-5 * max(float((hi - lo).max()), 1e-6)
+    return np.concatenate([lo - pad, hi + pad])
+
+
+def leaf_first_order(nodes: np.ndarray, tri_ids: np.ndarray, n: int) -> np.ndarray:
+    """The scene's triangle indices in the order the stored leaves (depth-first) first reference
+    them, then any never referenced: ``perm[new] = old``."""
+    w = nodes[:, 0]
+    lf = np.flatnonzero((w & 3) == LEAF)
+    cnt = (w[lf] >> 2).astype(np.int64)
+    x = nodes[lf, 1].astype(np.int64)
+    rep = np.repeat(np.arange(len(lf)), cnt)
+    off = np.arange(len(rep)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    xr = x[rep]
+    multi = cnt[rep] > 1
+    seq = xr.copy()
+    if len(tri_ids):
+        seq[multi] = tri_ids[xr[multi] + off[multi]]
+    _, first = np.unique(seq, return_index=True)
+    seen = seq[np.sort(first)]
+    rest = np.setdiff1d(np.arange(n), seen, assume_unique=True)
+    return np.concatenate([seen, rest]).astype(np.int64)
+
+
+class KdTree(TreeTraceMixin, Accel):
+    """pbrt-v2 SAH kd-tree (KdTreeAccel). Parameters: ``isect_cost`` (80), ``trav_cost`` (1),
+    ``empty_bonus`` (0.5), ``max_prims`` per leaf (1), ``max_depth`` (None: pbrt's
+    round(8 + 1.3 floor(log2 N))), ``extra_depth`` (0: added to pbrt's max depth; the clip build spends
+    levels on empty cut-offs around re-clipped triangles, 2 more levels pay there), ``clip`` (False: pbrt's build on whole-triangle bounds; True:
+    perfect splits on triangles clipped to the node, :mod:`tracer.accel.kdtree_clip`), ``constants``
+    (None, or a fitted estimator with ``ti_over_tt_``, e.g. :func:`costmodel.kdcost.fit_sah_constants`:
+    sets ``isect_cost`` to it with ``trav_cost`` 1)."""
+
+    _kernel = staticmethod(kd_trace)
+
+    name = "kdtree"
+    counter_fields = {"setups": "1 if the ray enters the root box", "steps": "leaves visited",
+                      "tests": "ray/triangle tests", "nodes": "nodes visited (leaves included)"}
+
+    def __init__(self, isect_cost=PBRT_KD_ISECT_COST, trav_cost=PBRT_KD_TRAVERSAL_COST,
+                 empty_bonus=PBRT_KD_EMPTY_BONUS, max_prims=PBRT_KD_MAX_PRIMS, max_depth=None,
+                 extra_depth=0, clip=False, constants=None, leaf_order=True):
+        if constants is not None:
+            isect_cost, trav_cost = float(constants.ti_over_tt_), 1.0
+        self.isect_cost, self.trav_cost, self.empty_bonus = isect_cost, trav_cost, empty_bonus
+        self.max_prims, self.max_depth, self.clip = max_prims, max_depth, bool(clip)
+        self.extra_depth, self.leaf_order = int(extra_depth), bool(leaf_order)
+
+    def build(self, scene):
+        n = scene.n
+        if n >= 2**29:
+            raise GridcostError(f"{n:,} triangles exceed the kd-tree's 29-bit index range")
+        if int(self.max_prims) < 0:
+            raise GridcostError(f"kd-tree max_prims must be >= 0, got {self.max_prims}")
+        depth = (pbrt_max_depth(n) + self.extra_depth) if self.max_depth is None else int(self.max_depth)
+        if depth < 0 or depth > 200:
+            raise GridcostError(f"kd-tree max_depth must be in [0, 200], got {depth}")
+        # edges (3 x 2N x 8 B) x ~4 for the work area, plus about 3 refs per triangle
+        check_budget(f"a kd-tree over {n:,} triangles of {scene.name}", n * (3 * 2 * 8 * 4 + 3 * 40 + 16))
+        t_start = time.perf_counter()
+        tris = scene.tris
+        lo = tris.min(axis=1)
+        hi = tris.max(axis=1)
+        rootb = (np.concatenate([lo.min(axis=0), hi.max(axis=0)]).astype(np.float64) if n
+                 else np.zeros(6))
+        costs = (int(self.max_prims), float(self.isect_cost), float(self.trav_cost), float(self.empty_bonus))
+        if self.clip:
+            built = kd_build_clip(np.ascontiguousarray(tris.reshape(-1, 9)), n, rootb, depth, *costs)
+        else:
+            ev_t, ev_c = sorted_edges(lo, hi)
+            cap = max(16, 8 * n)
+            wt = np.empty((3, cap), np.float32)
+            wc = np.empty((3, cap), np.int32)
+            wt[:, :2 * n] = ev_t
+            wc[:, :2 * n] = ev_c
+            del ev_t, ev_c
+            built = kd_build(wt, wc, n, rootb, depth, *costs)
+            del wt, wc
+        (w0, w1, spl, leaf_ids, nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area) = built
+        inner = (w0 & 3) != LEAF
+        w1 = np.where(inner, spl.view(np.int32), w1).astype(np.int32)
+        # single-triangle leaves hold the triangle's index itself (no refs-array indirection)
+        one_tri = ~inner & ((w0 >> 2) == 1)
+        w1[one_tri] = leaf_ids[w1[one_tri]]
+        nodes = kd_compact(w0, w1, depth)
+        if len(nodes) >= 2**27:
+            raise GridcostError(f"a kd-tree of {len(nodes):,} nodes exceeds the 27-bit child index")
+        self.nodes_ = nodes
+        self.nodes_f_ = nodes.view(np.float32)
+        self.logical_nodes_ = len(w0)
+        # vertices not copied per reference (9 refs per triangle would not fit L2): in scene order,
+        # or in leaf order with the map back to the scene's indices (-1 stays -1)
+        self.tri_order_ = None
+        if self.leaf_order and n:
+            perm = leaf_first_order(nodes, leaf_ids, n)
+            inv = np.empty(n, np.int32)
+            inv[perm] = np.arange(n, dtype=np.int32)
+            one = ((nodes[:, 0] & 3) == LEAF) & ((nodes[:, 0] >> 2) == 1)
+            nodes[one, 1] = inv[nodes[one, 1]]
+            leaf_ids = inv[leaf_ids]
+            tris = tris[perm]
+            self.tri_order_ = np.append(perm, -1).astype(np.int32)
+        self.tri_ids_ = leaf_ids
+        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9))
+        self.box_ = root_box(scene) if n else np.zeros(6)
+        self.build_seconds_ = time.perf_counter() - t_start
+        self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
+        self.n_, self.max_depth_, self.depth_ = n, depth, int(depth_reached)
+        self.leaves_, self.empty_leaves_ = int(nleaves), int(nempty)
+        ra = root_area if root_area > 0 else np.nan
+        self.sah_ = {"exp_inner": s_inner / ra, "exp_leaves": s_leaf / ra, "exp_tests": s_tests / ra}
+        self.scene_name_ = scene.name
+        return self
+
+    def _trace(self, o, d, tmin, tmax, anyhit, count):
+        out_t, out_id, cnt = super()._trace(o, d, tmin, tmax, anyhit, count)
+        if self.tri_order_ is not None:  # stored (leaf-order) indices -> the scene's; -1 -> -1
+            out_id = self.tri_order_[out_id]
+        return out_t, out_id, cnt
+
+    def stats(self) -> dict:
+        nn = self.logical_nodes_
+        refs = len(self.tri_ids_)
+        e = self.sah_
+        return {
+            "structure": "kdtree", "nodes": nn, "interior": nn - self.leaves_, "leaves": self.leaves_,
+            "empty_leaves": self.empty_leaves_, "stored_nodes": len(self.nodes_),
+            "depth": self.depth_, "max_depth": self.max_depth_,
+            "refs": refs, "refs_per_tri": refs / max(self.n_, 1),
+            "mean_leaf_refs": refs / max(self.leaves_ - self.empty_leaves_, 1),
+            # Havran-style expectations for a ray meeting the root box (surface-area ratios)
+            "exp_inner": e["exp_inner"], "exp_leaves": e["exp_leaves"], "exp_tests": e["exp_tests"],
+            "sah_cost": self.trav_cost * e["exp_inner"] + self.isect_cost * e["exp_tests"],
+            "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
+                                + (0 if self.tri_order_ is None else self.tri_order_.nbytes)),
+            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes
+                                       + (0 if self.tri_order_ is None else self.tri_order_.nbytes),
+                                       self.tri_verts_.nbytes),
+            "build_s": self.build_seconds_,
+            "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
+                       "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
+            "clip": self.clip, "extra_depth": self.extra_depth, "leaf_order": self.leaf_order,
+        }

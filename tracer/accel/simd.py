@@ -1,0 +1,65 @@
+"""Four-lane float32 operations that Numba does not vectorise by itself, as LLVM vector IR
+(:func:`numba.extending.intrinsic`): the slab test of the four child boxes of a 4-wide BVH node.
+
+Numba compiles the four box tests of :func:`tracer.accel.bvh4.bvh4_chunk` written as a loop to 48 scalar
+subtractions and multiplications and 24 scalar min/max (``vsubss``/``vmulss``/``vmaxss``: LLVM's
+SLP vectoriser does not combine them across the loop's stores). :func:`slab4` does the same
+arithmetic on ``<4 x float>`` vectors: the same float32 operations in the same order, per lane, so
+each lane's distances and hit bit are bit-identical to the scalar code (fastmath stays off: no
+reassociation, no fused multiply-add), including its NaN rule (a NaN plane distance, 0 x inf, is
+ignored: ``select(a > t, a, t)`` keeps ``t``).
+"""
+from __future__ import annotations
+
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+_F32 = ir.FloatType()
+_V4 = ir.VectorType(_F32, 4)
+_I32 = ir.IntType(32)
+
+
+def _splat(builder, x):
+    v = builder.insert_element(ir.Constant(_V4, ir.Undefined), x, _I32(0))
+    return builder.shuffle_vector(v, ir.Constant(_V4, ir.Undefined), ir.Constant(ir.VectorType(_I32, 4), [0, 0, 0, 0]))
+
+
+@intrinsic
+def slab4(typingctx, nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t4):
+    """``slab4(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t4)``
+    -> int64 hit mask (bit k: box k met) of the four boxes whose planes are the float32 words
+    ``nf[base + off + 0..3]`` (``off``: the near / far plane offsets on x, y, z); all scalars
+    float32. Per lane: entry = max(tlo, (near_x - ox) jx, (near_y - oy) jy, (near_z - oz) jz),
+    exit = min(thi, (far_x - ox) jx, …), each max/min ``select(a > t, a, t)`` in that order; hit =
+    entry <= exit + tol. The four entries are stored into ``t4`` (float32[4])."""
+    sig = types.int64(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t4)
+
+    def codegen(context, builder, signature, args):
+        (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, aox, aoy, aoz, ajx, ajy, ajz, atlo, athi, atol,
+         at4) = args
+        ary = context.make_array(signature.args[0])(context, builder, anf)
+        out = context.make_array(signature.args[17])(context, builder, at4)
+        vptr = _V4.as_pointer()
+
+        def planes(off):
+            p = builder.gep(ary.data, [builder.add(abase, off)])
+            return builder.load(builder.bitcast(p, vptr), align=4)
+
+        def dist(off, o, j):
+            return builder.fmul(builder.fsub(planes(off), _splat(builder, o)), _splat(builder, j))
+
+        def gt(t, a):  # a if a > t else t
+            return builder.select(builder.fcmp_ordered(">", a, t), a, t)
+
+        def lt(t, a):  # a if a < t else t
+            return builder.select(builder.fcmp_ordered("<", a, t), a, t)
+
+        tn = gt(gt(gt(_splat(builder, atlo), dist(anxo, aox, ajx)), dist(anyo, aoy, ajy)), dist(anzo, aoz, ajz))
+        tf = lt(lt(lt(_splat(builder, athi), dist(afxo, aox, ajx)), dist(afyo, aoy, ajy)), dist(afzo, aoz, ajz))
+        hit = builder.fcmp_ordered("<=", tn, builder.fadd(tf, _splat(builder, atol)))
+        builder.store(tn, builder.bitcast(out.data, vptr), align=4)
+        bits = builder.bitcast(hit, ir.IntType(4))
+        return builder.zext(bits, ir.IntType(64))
+
+    return sig, codegen

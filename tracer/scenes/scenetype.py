@@ -1,0 +1,84 @@
+"""The scene type every loader and generator returns: :class:`Scene` (triangles, bounds, provenance,
+load report, optional view), with :func:`scene_bounds` and :func:`validate`.
+
+This module imports nothing of ``tracer`` but its errors: mesh files (:mod:`tracer.scenes.meshfile`), the
+mesh registry (:mod:`tracer.scenes.registry`), procedural (:mod:`tracer.scenes.procedural`) and SPD
+(:mod:`tracer.scenes.spd`) scenes all build a :class:`Scene` from here, and :mod:`tracer.scenes.scene` (the one
+registry of scene names, which re-exports this module's names) sits above them all.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tracer.errors import GridcostError
+
+#: a flat axis is padded to this fraction of the largest extent
+FLAT_PAD = 1e-3
+#: every side of the bounds is pushed out by this fraction of the largest extent
+BOUNDS_PAD = 1e-5
+
+
+@dataclass
+class Scene:
+    """Triangles ``tris`` (N, 3, 3) float32, ``bounds`` (2, 3) float32, provenance and load report.
+
+    ``view``: an optional region of interest ``(center xyz, radius)`` that cameras frame (camera and
+    path rays, :func:`tracer.scenes.rays.camera_frame`); ``None`` (the default) frames the bounding sphere of
+    the whole scene. It changes neither the bounds nor random rays (those stay defined on the whole
+    scene's bounding sphere). ``teapot-in-stadium`` sets it to a close-up of the teapot."""
+    tris: np.ndarray
+    name: str
+    source: str = ""
+    report: dict = field(default_factory=dict)
+    bounds: np.ndarray = None
+    view: tuple | None = None
+
+    def __post_init__(self):
+        self.tris = np.ascontiguousarray(self.tris, dtype=np.float32).reshape(-1, 3, 3)
+        if self.bounds is None:
+            self.bounds = scene_bounds(self.tris)
+        if self.view is not None:
+            center, radius = self.view
+            center = np.asarray(center, dtype=np.float64).reshape(3)
+            radius = float(radius)
+            if not (np.isfinite(center).all() and np.isfinite(radius) and radius > 0):
+                raise GridcostError(f"{self.name}: view must be (finite center xyz, radius > 0), got {self.view!r}")
+            self.view = (center, radius)
+
+    @property
+    def n(self) -> int:
+        return int(self.tris.shape[0])
+
+    def __repr__(self) -> str:
+        return f"Scene({self.name!r}, N={self.n:,}, bounds={self.bounds.tolist()})"
+
+
+def scene_bounds(tris: np.ndarray) -> np.ndarray:
+    """Axis-aligned bounds; an axis along which the mesh is flat is padded (FLAT_PAD of the extent)."""
+    v = tris.reshape(-1, 3)
+    lo = v.min(axis=0).astype(np.float64)
+    hi = v.max(axis=0).astype(np.float64)
+    ext = hi - lo
+    pad = FLAT_PAD * max(float(ext.max()), 1e-6)
+    flat = ext < pad
+    lo[flat] -= pad
+    hi[flat] += pad
+    # pad outward (BOUNDS_PAD of the largest extent) so rays through boundary vertices/edges
+    # meet the box despite rounding in the slab test
+    margin = BOUNDS_PAD * max(float(ext.max()), 1e-6)
+    return np.stack([lo - margin, hi + margin]).astype(np.float32)
+
+
+def validate(tris: np.ndarray, where: str) -> dict:
+    """Refuse empty or non-finite meshes; count (keep) zero-area triangles."""
+    if tris.size == 0:
+        raise GridcostError(f"{where}: mesh is empty (0 triangles)")
+    bad = ~np.isfinite(tris).all(axis=(1, 2))
+    if bad.any():
+        raise GridcostError(f"{where}: {int(bad.sum())} triangles have NaN or inf vertices "
+                            f"(first: triangle {int(np.flatnonzero(bad)[0])})")
+    t = tris.astype(np.float64)
+    area2 = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    return {"degenerate": int((area2 == 0).sum())}

@@ -1,0 +1,62 @@
+"""Files gridcost writes: the one atomic write, and where the user cache lives.
+
+Every file gridcost writes (results, stored points, caches, downloads) goes through
+:func:`atomic_write` or :func:`atomic_savez`: the bytes go to a temporary file in the same folder
+and are moved into place with ``os.replace``, so a kill or a full disk leaves either the old file or
+the new one, never half of one. Caches use ``strict=False``: a read-only or full cache is not an
+error (the value is recomputed next time); results use the default and fail loudly.
+"""
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from pathlib import Path
+
+
+def cache_root() -> Path:
+    """The user cache: ``$GRIDCOST_CACHE``, else ``platformdirs.user_cache_dir("gridcost")`` (on Linux
+    ``~/.cache/gridcost``). Parsed meshes, downloads, stand-ins, oracle answers, the machine probe
+    and the compiled kernels live here."""
+    env = os.environ.get("GRIDCOST_CACHE")
+    if env:
+        return Path(env).expanduser()
+    try:
+        import platformdirs
+        return Path(platformdirs.user_cache_dir("gridcost", appauthor=False))
+    except ImportError:  # a dependency, but the loader must not fail without it
+        return Path.home() / ".cache" / "gridcost"
+
+
+def atomic_write(path, data: str | bytes, *, strict: bool = True, mode: int | None = None) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then ``os.replace``).
+
+    ``strict=False`` swallows an ``OSError`` (for caches); ``mode`` sets the file's permissions
+    (``mkstemp`` creates files 0600)."""
+    path = Path(path)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+        if mode is not None:
+            os.chmod(tmp, mode)
+        os.replace(tmp, path)
+        tmp = None
+    except OSError:
+        if strict:
+            raise
+    finally:
+        if tmp is not None and os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def atomic_savez(path, *, strict: bool = False, **arrays) -> Path:
+    """``np.savez`` through :func:`atomic_write` (a cache write by default: ``strict=False``)."""
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return atomic_write(path, buf.getvalue(), strict=strict)
