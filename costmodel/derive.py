@@ -21,17 +21,20 @@ from typing import Callable
 
 import sympy as sp
 
+from costmodel.papers import ize2007
+
 R = sp.Rational
 N, N2, Tsetup, Ts, Ti, k = sp.symbols("N N2 Tsetup Ts Ti k", positive=True)
 m, M, m1, m2, m3, M1, M2 = sp.symbols("m M m1 m2 m3 M1 M2", positive=True)
 k1, k2 = sp.symbols("k1 k2", positive=True)
 L = sp.Symbol("L", positive=True, integer=True)
 
-#: Sec 2.2: "T_intersection/T_step is on average 4" (the same number as tracer.accel.constants.IZE_TI_OVER_TS).
-PAPER_TI_OVER_TS = sp.Integer(4)
+#: Sec 2.2: the paper's Ti/Ts (:data:`costmodel.papers.ize2007.TI_OVER_TS`);
+#: tracer.accel.constants.IZE_TI_OVER_TS is tied to it by a test.
+PAPER_TI_OVER_TS = sp.Integer(ize2007.TI_OVER_TS.value)
 #: Table 2 "theoretical M" (= 8N) and Table 3 (= 8 N^1.5), N -> M as printed in the paper.
-PAPER_TABLE2 = {948: 7584, 69451: 555608, 15536: 124288, 1087716: 8701728, 282664: 2261312}
-PAPER_TABLE3 = {196: 21952, 3996: 2020822, 19996: 22620629}
+PAPER_TABLE2 = {r["N"]: r["theoretical_M"] for r in ize2007.TABLE2.records()}
+PAPER_TABLE3 = {r["N"]: r["theoretical_M"] for r in ize2007.TABLE3.records()}
 
 
 @dataclass(frozen=True)
@@ -336,3 +339,13 @@ def long_skinny_time(M, N, Tsetup, Ts, Ti):  # noqa: N803
 def two_level_time(M1, M2, N, k, Tsetup, Ts, Ti):  # noqa: N803
     """Eq 9 as a numpy function of the cell counts M1 (top) and M2 (per subgrid)."""
     return ize_eq13_two_level_optimum().time_fn(M1, M2, N, k, Tsetup, Ts, Ti)
+
+
+_NKTT = (N, k, Ti, Ts)
+
+
+def two_level_M1(N, k=1, ti_over_ts=None):  # noqa: N802, N803
+    """Eq 13 as a numpy function: M1 = (2 k^2 N Ti/Ts)^0.6, the paper's Ti/Ts (4) unless given; with
+    k = 1 this is the (8N)^0.6 rule of Sec 4.2 every target and tracer.accel.nested use."""
+    r = float(PAPER_TI_OVER_TS) if ti_over_ts is None else ti_over_ts
+    return _lam(_NKTT, ize_eq13_two_level_optimum().optimum)(N, k, r, 1.0)

@@ -299,3 +299,26 @@ def _report() -> dict:
 def report() -> dict:
     """``{"models": {name: {...}}}``: cost, optimum, exact exponent beside the paper's, match flags, notes."""
     return copy.deepcopy(_report())
+
+
+# ---------------------------------------------------------------------------------- at the paper's constants
+def paper_cells(result, n: int) -> float:
+    """A derived cell count (``result.optimum`` of this module) at the paper's
+    constants: every occupancy constant k, k_j = 1 (Sec 4.2: "setting it to 1 seemed to give the best
+    results") and Ti/Ts = 4 (Sec 2), for a scene of ``n`` triangles."""
+    return float(_paper_fn(result.name, result.optimum)(n))
+
+
+@lru_cache(maxsize=None)
+def _paper_fn(name: str, optimum):
+    ks = {s: 1 for s in optimum.free_symbols if s.name.startswith("k")}
+    return sp.lambdify(N, sp.simplify(optimum.subs({**ks, Ti: PAPER_TI_OVER_TS * Ts})), "math")
+
+
+def d_level_m1(n: int, levels: int) -> float:
+    """Top-level cells of an L-level grid, Ize 2007 Eq 16 (Eq 4 for L = 1, Eq 13 for L = 2, Eq 15 for L = 3):
+
+        M1 = (2 N k1^(2(L-1)) ... Ti/Ts)^(3/(2L+1))  ->  (8N)^(3/(2L+1))  with every k_j = 1, Ti/Ts = 4,
+
+    evaluated from the sympy optimum of :func:`ize_eq16_d_level_top`."""
+    return paper_cells(ize_eq16_d_level_top(levels), n)

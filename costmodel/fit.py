@@ -269,3 +269,12 @@ def pooling_evidence(scenes, steps, tests, T) -> dict:
     a_p, a_s = aic(float(rel_p @ rel_p), S + 2), aic(float(rel_s @ rel_s), 3 * S)
     return {"aic_pooled": a_p, "aic_per_scene": a_s, "k_pooled": S + 2, "k_per_scene": 3 * S,
             "per_scene": a_s < a_p - 10.0, "fits": per}
+
+
+def counter_fits(df) -> tuple:
+    """(pooled :class:`CounterCostFit`, :func:`pooling_evidence`, scene -> its own Ti/Ts) of the
+    random-ray rows of a one-level sweep (table2, table3)."""
+    rnd = df[df.ray_kind == "random"]
+    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
+    return cfit, pool, {s: f.ti_over_ts_ for s, f in pool["fits"].items()}

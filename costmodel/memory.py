@@ -35,7 +35,7 @@ import numpy as np
 import sympy as sp
 from scipy.optimize import nnls
 
-from costmodel.derive import N, Ti, Ts, Tsetup, M, m, ize_eq4_one_level_optimum, ize_eq8_long_skinny_optimum, same
+from costmodel.derive import N, Ti, Ts, M, m, ize_eq4_one_level_optimum, ize_eq8_long_skinny_optimum, same
 from costmodel.fit import _metrics
 
 B, beta, Ts0 = sp.symbols("B beta Ts0", positive=True)

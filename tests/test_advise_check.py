@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.tools import advise, advise_check
+from experiments.tools import advise_check
+from experiments.tools.lib import advising as advise
 from tracer.errors import GridcostError
 
 

@@ -185,3 +185,22 @@ def test_cli_derive_text(tmp_path):
                           cwd=str(REPO), env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert "two_level_m1" in proc.stdout and "3/5" in proc.stdout and "MISMATCH" in proc.stdout
+
+
+def test_numeric_copies_of_the_paper_rules_are_the_sympy_results():
+    """tracer/ cannot import costmodel, so its constants are numbers; each is tied here to the
+    derivation (Eq 4's 8N, Eq 13's (8N)^0.6) and to the paper's Ti/Ts."""
+    import numpy as np
+
+    from costmodel.derive import one_level_optimal_M, two_level_M1
+    from costmodel.papers import ize2007
+    from tracer.accel import constants as c
+    from tracer.accel.nested import NestedGrid
+
+    assert c.IZE_TI_OVER_TS == ize2007.TI_OVER_TS.value
+    n = np.array([948.0, 69451.0, 1087716.0])
+    assert np.allclose(c.IZE_M_FACTOR * n, one_level_optimal_M(n, 1.0, c.IZE_TI_OVER_TS), rtol=1e-12)
+    assert np.allclose((c.IZE_M_FACTOR * n) ** c.IZE_M1_EXPONENT, two_level_M1(n), rtol=1e-12)
+    # the nested grid's own top-level cell count for the "ize" rule is the derived one
+    for count in (948, 69451):
+        assert abs(NestedGrid(levels=2, m1_rule="ize")._m1_cells(count, "ize") / two_level_M1(count) - 1) < 1e-12

@@ -176,7 +176,7 @@ def test_bad_input_exit_code(tmp_path):
 def test_memprobe_hollow_rays_and_costs():
     """Hollow rays cross only empty cells (the probe asserts it), and the probed costs are real
     positive times with a triangle test dearer than an empty step."""
-    from experiments.ize import memprobe
+    from experiments.ize.lib import memprobe
     from tracer.accel.oracle import oracle_intersect
     from tracer.scenes.rays import make_rays
     from tracer.scenes.scene import load_scene

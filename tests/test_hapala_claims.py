@@ -6,15 +6,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.hapala.claims import STAND_INS, claims, hapala_sec5_build_slowdown, hapala_sec5_speedup
-from experiments.hapala.table1 import PAPER, default_scenes
+from experiments.hapala.lib.claims import STAND_INS, claims, hapala_sec3_build_slowdown, hapala_sec3_speedup
+from experiments.hapala.lib.calibrate import default_scenes
+from experiments.hapala.table1 import PAPER
 
 
 def test_sec5_formulas_on_the_papers_boxes_row():
     boxes = PAPER[0]  # 528 triangles: T_B^G 2 ms, T_B^H 12 ms, random t_G 5.0 us, t_H 4.1 us
-    assert hapala_sec5_build_slowdown(boxes[3], boxes[4]) == pytest.approx(2 / 12)
+    assert hapala_sec3_build_slowdown(boxes[3], boxes[4]) == pytest.approx(2 / 12)
     lg = np.log2(528)
-    assert hapala_sec5_speedup(528, 2.0, 12.0, 5.0e-3, 4.1e-3) == pytest.approx((12 + 4.1e-3 * lg) / (2 + 5e-3 * lg))
+    assert hapala_sec3_speedup(528, 2.0, 12.0, 5.0e-3, 4.1e-3) == pytest.approx((12 + 4.1e-3 * lg) / (2 + 5e-3 * lg))
 
 
 def test_claims_table_reads_units_and_extremes():

@@ -144,7 +144,7 @@ def test_point_with_another_key_is_remeasured(tmp_path, monkeypatch):
 def test_code_in_key_invalidates(tmp_path):
     """The key covers the experiment code that shapes a point, beside tracer/."""
     a = PointStore(tmp_path, code=("experiments/core/sweep.py",))
-    b = PointStore(tmp_path, code=("experiments/core/sweep.py", "experiments/ize/memprobe.py"))
+    b = PointStore(tmp_path, code=("experiments/core/sweep.py", "experiments/ize/lib/memprobe.py"))
     assert a.measurement_key["code"] != b.measurement_key["code"]
     a.put({"p": 2}, {"v": 1})
     assert b.get({"p": 2}) is None

@@ -155,7 +155,7 @@ def test_havran_statistics_of_a_built_2x2x2_grid():
 @pytest.fixture(scope="module")
 def spd_calibration():
     """A small real calibration (path rays) of three SPD-like scenes."""
-    from experiments.hapala.table1 import calibrate_scene
+    from experiments.hapala.lib.calibrate import calibrate_scene
     from tracer.scenes.spd import spd_scene
     raw = [calibrate_scene(spd_scene(n), kinds=("path",), n_rays=2000, samples=(500,), repeats=2)
            for n in ("sphereflake-1", "tree-4", "tetra-4")]

@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.wald.views import ROOM_EYE, inside_view, light_position, shadow_rays, wald_camera
+from experiments.wald.lib.views import ROOM_EYE, inside_view, light_position, shadow_rays, wald_camera
 from tracer.accel.oracle import oracle_intersect
 from tracer.accel.packet import CoherentGrid
 from tracer.scenes.rays import camera_frame, make_rays
@@ -92,7 +92,7 @@ def test_needs_of_single_rays_are_their_own_walks(bunny):
     """With one ray per 'packet' the needs kernel is the ray's own walk: its distinct cells are the
     grid's steps and the references they hold are the unmailboxed grid's tests, ray for ray; packets
     of 64 share cells, so their distinct cells and references fall below the sum of their rays'."""
-    from experiments.wald.needs import needs_row, packet_needs
+    from experiments.wald.lib.needs import needs_row, packet_needs
     from tracer.accel.grid import UniformGrid
     rays = wald_camera(bunny, 48, 8)
     g = UniformGrid(res=(12, 11, 10)).build(bunny)

@@ -66,7 +66,7 @@ PROVENANCE_COLUMNS = ("commit", "host", "clock")
 TEXT_COLUMNS = PROVENANCE_COLUMNS + ("source_commit", "worker")
 
 
-def read_csv(path) -> "pd.DataFrame":
+def read_csv(path):
     """A results CSV, its provenance columns (:data:`TEXT_COLUMNS`) read as text."""
     import pandas as pd
     return pd.read_csv(path, dtype={c: str for c in TEXT_COLUMNS})

@@ -243,3 +243,9 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
 def fastest(rows_df, k: int = 3) -> list[float]:
     """Cell counts of the k fastest rows of a (one scene, one ray kind) frame."""
     return [float(c) for c in rows_df.nsmallest(k, "anchored_ns_per_ray").param_cells]
+
+
+def cells_sweep(n: int, points: int) -> list[dict]:
+    """From N/2 to 4 x 8 N^1.5 on a log grid, always including 8N and 8N^1.5."""
+    grid = np.geomspace(0.5 * n, 32.0 * n**1.5, points)
+    return [{"cells": float(round(m))} for m in sorted(set(np.round(grid).tolist()) | {8.0 * n, round(8.0 * n**1.5)})]

@@ -90,3 +90,22 @@ def run_quiet(run: Callable, ctx, args) -> int:
     """A target's ``main``: ``run`` with the summary printed, or not under ``--json``."""
     run(ctx, args, log=(lambda *a: None) if args.json else print)
     return 0
+
+
+def ensure_input(ctx, args, target: str, path: Path, log: Callable = print, **overrides) -> None:
+    """Run ``target`` first when the output ``path`` a derived target reads is missing.
+
+    The target is named, not imported: the runner's table (:data:`experiments.run.TARGETS`) resolves
+    it, so no target module imports another. ``overrides`` replace arguments of this run (a derived
+    target's own flags) with the input target's defaults."""
+    if path.exists():
+        return
+    import argparse
+    import importlib
+    log(f"{path} missing: running {target} first")
+    module = importlib.import_module(importlib.import_module("experiments.run").TARGETS[target][0])
+    a = argparse.Namespace(**{**vars(args), "target": target, **overrides})
+    if hasattr(module, "run"):
+        module.run(ctx, a, log=log)
+    else:
+        module.main(ctx, a)

@@ -4,7 +4,7 @@ as in Table 1, and with the hierarchy of Sec. 3) beside a 30 x 30 x 30 uniform g
 scenes (sphereflake, tetra, gears, tree) at several size factors and on Newell's teapot (29 objects: its
 28 patches and a floor); the paper's numbers beside ours, counted per object as the paper counts them
 where the scene's objects are known (Table 1's rows). The Around Again scene with secondary rays and
-the figure of times beside counts are in :mod:`experiments.fournier.around`."""
+the figure of times beside counts are in :mod:`experiments.fournier.lib.around`."""
 from __future__ import annotations
 
 import argparse
@@ -21,7 +21,7 @@ from experiments.core.figures import log_scale, row_legend
 
 from experiments.core.common import progress
 
-from experiments.fournier.around import around_summary, measure_around, time_figure
+from experiments.fournier.lib.around import around_summary, measure_around, time_figure
 
 TARGET = "fournier-table1"
 
@@ -39,7 +39,7 @@ PAPER_TABLE1 = [
     ("tetra-6", "Tetra VI", 4096, 0.27, 28.80, 3.84, 5354.1, 75.58),
     ("teapot", "Teapot", 29, 1.00, 1.67, 2.70, 119.9, 2.63),
 ]
-#: Newell's teapot (28 patches) on a floor: :func:`experiments.fournier.scenes.teapot_scene`
+#: Newell's teapot (28 patches) on a floor: :func:`experiments.fournier.lib.scenes.teapot_scene`
 TEAPOT = "teapot"
 #: numbers quoted in the paper's text about Figs 3-10
 PAPER_TEXT = {
@@ -54,7 +54,7 @@ FULL = {"sphereflake": (1, 2, 3, 4), "tetra": (1, 2, 3, 4, 5, 6, 7, 8), "gears":
 QUICK = {"sphereflake": (1, 2), "tetra": (1, 3, 5), "gears": (1,), "tree": (2, 5)}
 FAMILIES = ("sphereflake", "tetra", "gears", "tree")
 STRUCTS = ("grid30", "grid30mb", "sl-hier", "sl-flat", "nogrid")
-CODE = ("experiments/fournier/table1.py", "experiments/fournier/around.py", "experiments/fournier/scenes.py")
+CODE = ("experiments/fournier/table1.py", "experiments/fournier/lib/around.py", "experiments/fournier/lib/scenes.py")
 #: the flat lists cost O(N) per ray: above this many ray x triangle pairs they trace an evenly spaced subset
 FLAT_BUDGET = 2e8
 
@@ -96,9 +96,9 @@ def _agree(hits, ref_t, ref_id, rtol=1e-5) -> int:
 def object_ids(name, n) -> np.ndarray | None:
     """The paper's object of each triangle of a Table 1 scene (None for the other scenes): a tetra
     triangle is an object; a sphereflake's floor square (its first 2 triangles) and each sphere (48
-    triangles) are; the teapot's patches and floor (:func:`experiments.fournier.scenes.teapot_scene`)."""
+    triangles) are; the teapot's patches and floor (:func:`experiments.fournier.lib.scenes.teapot_scene`)."""
     if name == TEAPOT:
-        from experiments.fournier.scenes import teapot_scene
+        from experiments.fournier.lib.scenes import teapot_scene
         return teapot_scene()[1]
     if name.startswith("tetra-"):
         return np.arange(n)
@@ -110,7 +110,7 @@ def object_ids(name, n) -> np.ndarray | None:
 def _scene_and_rays(name, res):
     """(scene, family, size factor, paper's object count, eye rays) of an SPD scene or the teapot."""
     if name == TEAPOT:
-        from experiments.fournier.scenes import teapot_rays, teapot_scene
+        from experiments.fournier.lib.scenes import teapot_rays, teapot_scene
         scene, _, n_obj = teapot_scene()
         return scene, TEAPOT, 1, n_obj, teapot_rays(res)
     from tracer.scenes.spd import parse, spd_camera_rays, spd_objects, spd_scene
@@ -123,7 +123,7 @@ def measure_scene(name, args, res, repeats, flat_max) -> list[dict]:
     counts, agreement with the oracle (or the grid above ``nogrid_max``), and times (lists vs the 30^3
     grid paired); for Table 1's scenes also the flat lists counted per object (the paper's objects,
     :func:`object_ids`). One task of the run; ``args`` holds nogrid_max, leaf_size and branching."""
-    from experiments.fournier.around import object_boxes, flat_object_counts
+    from experiments.fournier.lib.around import object_boxes, flat_object_counts
     from tracer.accel.oracle import oracle_intersect
     from tracer.measure.timing import build_clock, paired_ratio, time_call, time_paired
     scene, family, sf, n_obj, (o, d) = _scene_and_rays(name, res)
@@ -311,7 +311,7 @@ def _summary(df, wide, t1, res, repeats, threads, args, around=None) -> str:
     g = lambda r, k: r[k] if k in r and pd.notna(r[k]) else None  # noqa: E731
     lines = [
         "# Table 1 (Fournier & Poulin 1993): sorted event lists vs a 30³ uniform grid", "",
-        f"SPD scenes made of triangles (`tracer.scenes.spd`) and Newell's teapot on a floor (`experiments/fournier/scenes.py`), "
+        f"SPD scenes made of triangles (`tracer.scenes.spd`) and Newell's teapot on a floor (`experiments/fournier/lib/scenes.py`), "
         f"{res}x{res} eye rays from each scene's viewpoint ({res * res:,} rays per scene; eye rays only, no shadow or "
         f"reflection rays in these tables), {threads} thread(s), median of {repeats} timed run(s). Sorted lists: "
         f"`SortedLists(leaf_size={args.leaf_size}, branching={args.branching})` (hierarchy) and "

@@ -12,16 +12,22 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from costmodel.papers import hapala2011
 from costmodel.select import (ERR_CAP, R_VALUES, SAMPLE_SIZES, GridcostEstimator, HapalaEstimator, evaluate,
                               exact_rc, loo_errors, records)
 from experiments.core.store import atomic_write
 from experiments.core.figures import log_scale
+from experiments.core.target import ensure_input
 
 KIND = {"fig1h": "random", "fig2h": "path"}
 ESTIMATORS = {"paper": HapalaEstimator, "ours": GridcostEstimator}
 #: the paper's reading of its Fig 1 / Fig 2 (Sec 4)
-PAPER_READING = {"random": "about +25 % (the estimate is optimistic about the grid), stable except at the extremes of C",
-                 "path": "off by around 30 %, less stable, tending to predict the grid worse than it is"}
+#: the paper's reading of its Figs 1-2 (Sec 4), values from :mod:`costmodel.papers.hapala2011`
+PAPER_READING = {
+    "random": f"about +{hapala2011.ESTIMATE_ERROR['random'].value:g} % (the estimate is optimistic about the grid), "
+              "stable except at the extremes of C",
+    "path": f"off by around {hapala2011.ESTIMATE_ERROR['path'].value:g} %, less stable, tending to predict the grid "
+            "worse than it is"}
 #: scenes of the stability section: (scene, why)
 STABILITY = [("teapot-in-stadium", "teapot in a stadium"), ("cylinder-196", "long skinny triangles"),
              ("cylinder-3996", "long skinny triangles"), ("cylinder-19996", "long skinny triangles"),
@@ -40,20 +46,16 @@ def load_raw(ctx, args, log=print) -> list[dict]:
     """table1h's measurements; run table1h first (same --quick / --out) when they are missing."""
     import json
     path = Path(args.out) / "table1h" / "raw.json"
-    if not path.exists():
-        log(f"{path} missing: running table1h first")
-        from experiments.hapala import table1 as hapala_table1
-        import argparse
-        a = argparse.Namespace(**{**vars(args), "target": "table1h", "scenes": None, "rays": None, "repeats": None,
-                                  "grid_factor": None, "json": False})
-        hapala_table1.run(ctx, a, log=log)
+    ensure_input(ctx, args, "table1h", path, log=log, scenes=None, rays=None, repeats=None, grid_factor=None,
+                 json=False)
     return json.loads(path.read_text())
 
 
 def paper_frame(kind: str) -> pd.DataFrame:
     """The paper's Table 1 as calibration records (seconds), R_C recomputed from its rounded times
     (the printed R_C column is kept as ``R_C_table``; the table's "0" means the grid wins outright)."""
-    from experiments.hapala.table1 import PAPER
+    from costmodel.papers.hapala2011 import TABLE1
+    PAPER = TABLE1.rows
     c = 5 if kind == "random" else 8
     df = pd.DataFrame({"scene": [p[0] for p in PAPER], "N": [p[1] for p in PAPER],
                        "T_BG": [p[3] * 1e-3 for p in PAPER], "T_BH": [p[4] * 1e-3 for p in PAPER],
@@ -127,7 +129,7 @@ def run(ctx, args, log=print) -> dict:
     rpath = Path(args.out) / "table1h" / "raw_retest.json"
     if rpath.exists():
         import json
-        from experiments.hapala.table1 import retest
+        from experiments.hapala.lib.calibrate import retest
         rt = retest(raw, json.loads(rpath.read_text()))
         rt = rt[(rt.hier == args.hier) & (rt.kind == kind)]
         floor = rt.iloc[0] if len(rt) else None
@@ -209,7 +211,7 @@ def summary(target, kind, hier, cal, ev, loo, full, forms, sa, ev_other, other, 
         "from the rounded printed times, so scenes near the tie are noisy, as in ours): "
         + "; ".join(f"C = {C}: mean Err {_pct(at(pd_, C).mean_err)}, mean |Err| {_apct(at(pd_, C).mean_abs_err)}, "
                     f"median |Err| {_apct(at(pd_, C).median_abs_err)}" for C in (2, 14, 27) if C in set(pd_.C))
-        + f". The paper reports {PAPER_READING[kind]}. Its Fig 1/2 average Err over 5000 splits; the heavy tail of "
+        + f". The paper reports {PAPER_READING[kind]}. Its Fig 1/2 average Err over {hapala2011.SPLITS.value:,} splits; the heavy tail of "
           "Err (estimates near the tie t_R^H ≈ t_R^G) makes the mean depend on how such estimates are scored, which the "
           "paper does not state, so the medians are the comparable figure.", "",
         "## Which form won, and why", "",

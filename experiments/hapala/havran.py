@@ -13,7 +13,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.select import GRID_FACTOR, havran_stats, records
-from experiments.hapala.table1 import PAPER, PAPER_MATCH, default_scenes, load_any
+from experiments.hapala.lib.calibrate import default_scenes, load_any
+from experiments.hapala.lib.claims import PAPER_MATCH
+from costmodel.papers.hapala2011 import TABLE1
 from experiments.core.store import atomic_write
 from experiments.core.common import progress
 
@@ -47,7 +49,7 @@ def run(ctx, args, log=print) -> pd.DataFrame:
         if t and "kdtree" in t["hier"]:
             for _, k in records([t]).iterrows():
                 r[f"kd_pays_{k.kind}"] = bool(np.isfinite(k.R_C))
-        p = {q[0]: q for q in PAPER}.get(PAPER_MATCH.get(name, ""))
+        p = {q[0]: q for q in TABLE1.rows}.get(PAPER_MATCH.get(name, ""))
         r["paper_sigma"] = p[2] if p else None
         rows.append(r)
     df = pd.DataFrame(rows).sort_values("N", kind="stable").reset_index(drop=True)

@@ -16,134 +16,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
-                              time_stats)
+from costmodel.papers import hapala2011
+from costmodel.select import GRID_FACTOR, records
 from experiments.core.store import atomic_write, write_json
-from experiments.hapala.claims import STAND_INS, claims, claims_markdown
-from experiments.core.common import progress
+from experiments.hapala.lib.calibrate import KINDS, default_scenes, measure_all, retest, settings
+from experiments.hapala.lib.claims import PAPER_MATCH, STAND_INS, claims, claims_markdown
 from tracer.measure.timing import set_threads
 
-KINDS = ("random", "path")
-#: the paper's Table 1: scene, N, sigma, T_B^G ms, T_B^H ms, random (t_G us, t_H us, R_C), path (t_G, t_H, R_C)
-PAPER = [
-    ("boxes", 528, 7.46, 2, 12, 5.0, 4.1, 11669, 0.9, 1.4, 0),
-    ("interior dance", 1990, 10.84, 3, 50, 5.0, 4.2, 55328, 0.7, 1.3, 0),
-    ("cornell", 2450, 8.73, 3, 42, 7.9, 5.5, 15773, 3.0, 3.0, 38177),
-    ("sphere", 2880, 4.85, 4, 74, 7.7, 7.9, 0, 0.6, 1.6, 0),
-    ("teapot", 3080, 7.50, 32, 73, 6.8, 6.0, 78320, 0.8, 1.6, 0),
-    ("interior 3", 3412, 10.75, 4, 83, 4.6, 3.8, 101888, 0.9, 1.0, 124367),
-    ("phone", 7716, 15.85, 6, 207, 3.3, 2.9, 441922, 3.3, 0.9, 53984),
-    ("spheres", 31460, 7.70, 22, 696, 11.2, 8.1, 211736, 2.0, 4.9, 0),
-    ("pills", 32606, 12.90, 21, 802, 7.1, 3.6, 221538, 2.3, 1.8, 593553),
-    ("teapots", 52360, 12.43, 29, 1215, 13.4, 6.8, 172843, 4.3, 5.4, 1620297),
-    ("building", 54490, 42.19, 21, 995, 6.3, 3.1, 304414, 12.8, 1.8, 63055),
-    ("knot", 56448, 6.97, 35, 1300, 20.2, 12.1, 147560, 1.3, 3.3, 0),
-    ("bunny", 69473, 7.48, 35, 1639, 33.1, 10.8, 69587, 1.3, 2.5, 0),
-    ("interior japan", 72310, 43.03, 36, 1241, 4.6, 4.8, 0, 3.1, 1.9, 515863),
-    ("sphere-high", 87120, 6.68, 48, 1751, 23.5, 13.5, 161984, 1.1, 2.8, 0),
-    ("case", 131228, 24.93, 51, 2872, 14.0, 4.2, 293541, 5.3, 3.0, 638451),
-    ("hunger", 141143, 64.21, 47, 2586, 15.9, 5.6, 250041, 68.2, 3.1, 236153),
-    ("interior deloix", 149090, 16.02, 67, 3928, 22.9, 6.6, 231927, 3.0, 1.9, 1704493),
-    ("camel", 178102, 72.49, 73, 3734, 23.0, 6.0, 216668, 3.3, 2.5, 1734172),
-    ("sockets", 187330, 15.93, 102, 5229, 22.8, 8.9, 358906, 1.2, 2.8, 0),
-    ("conference", 190947, 25.62, 97, 4428, 19.4, 7.1, 348928, 2.8, 2.7, 3268361),
-    ("chess", 249608, 12.65, 103, 5799, 16.4, 5.1, 543065, 1.4, 1.1, 6037314),
-    ("phone-high", 318756, 30.72, 145, 8163, 6.7, 2.9, 2262962, 7.5, 1.5, 856324),
-    ("pills-high", 590626, 15.23, 283, 18694, 17.7, 4.3, 1401905, 4.6, 2.9, 5082077),
-    ("a10", 1070671, 60.79, 403, 29921, 25.0, 5.9, 1544378, 2.6, 3.1, 52604130),
-    ("hunger-high", 1418560, 136.61, 384, 27690, 44.2, 5.6, 727590, 156.3, 3.9, 27356),
-    ("case-high", 1614006, 36.86, 501, 37224, 39.6, 4.5, 1108126, 11.1, 4.5, 3101617),
-    ("sockets-high", 1658432, 16.80, 730, 45842, 41.0, 11.0, 1516267, 2.7, 4.1, 0),
-]
+#: the paper's Table 1 as printed: scene, N, sigma, T_B^G ms, T_B^H ms, random (t_G us, t_H us, R_C), path (t_G, t_H, R_C)
+PAPER = hapala2011.TABLE1.rows
 PAPER_COLS = ["paper_scene", "paper_N", "paper_sigma", "paper_T_BG_ms", "paper_T_BH_ms", "paper_t_RG_us_random",
               "paper_t_RH_us_random", "paper_R_C_random", "paper_t_RG_us_path", "paper_t_RH_us_path", "paper_R_C_path"]
-#: our scene -> the paper's scene it stands in for (same model or same procedural recipe)
-PAPER_MATCH = {"boxes-44": "boxes", "cornell": "cornell", "sphere-2880": "sphere", "teapot": "teapot",
-               "knot-56k": "knot", "bunny-69k": "bunny", "sphere-87k": "sphere-high", "room": "conference"}
-PROCEDURAL = ["boxes-44", "cylinder-196", "particles-2000", "sphere-2880", "cylinder-3996", "teapot-in-stadium",
-              "boxes-2000", "cylinder-19996", "surfpoints-20k", "knot-56k", "sphere-87k", "particles-100k", "room"]
-SPD = ["tetra-6", "sphereflake-2", "gears-3", "tree-8", "sphereflake-3"]
-QUICK = ["cornell", "boxes-44", "bunny-948", "suzanne", "cylinder-196", "particles-2000", "teapot",
-         "teapot-in-stadium"]
 
 
 # ---------------------------------------------------------------- calibration phase (Hapala Sec 3, steps 1-4)
-def _timed_build(scene, structure, params, repeats):
-    """(structure, build seconds {median, min} of ``repeats`` builds after a warm-up, the structure's
-    own build_s). Builds are timed with wall time (:data:`tracer.measure.timing.build_clock`): a library may
-    build on threads the calling thread's CPU time does not see."""
-    from tracer.accel import build
-    from tracer.measure.timing import build_clock
-    acc = build(scene, structure, **params)  # warm-up (JIT, caches); kept for tracing
-    cpu, wall = [], []
-    for _ in range(max(repeats, 1)):
-        t0 = build_clock()
-        a = build(scene, structure, **params)
-        cpu.append(build_clock() - t0)
-        wall.append(a.stats()["build_s"])
-    return acc, time_stats(cpu), float(np.median(wall))
-
-
-def paired_times(fns: dict, repeats: int) -> dict:
-    """Per-call time {median, min} of each function over ``repeats`` interleaved rounds
-    (:func:`tracer.measure.timing.time_paired`, one sample per function per round, on the default clock), so
-    that busy phases of a shared machine hit every structure alike."""
-    from tracer.measure.timing import time_paired
-    return {k: time_stats(v) for k, v in time_paired(fns, rounds=repeats, repeats=1).items()}
-
-
-def calibrate_scene(scene, kinds=("random", "path"), n_rays: int = 10_000, samples=SAMPLE_SIZES,
-                    repeats: int = 5, grid_factor: float = GRID_FACTOR, hiers=("kdtree",),
-                    seed: int = 0) -> dict:
-    """Calibration steps 1-4 for one scene: grid build time T_B^G (cells = grid_factor N), the
-    grid's per-ray time on ``n_rays`` rays of each kind, each hierarchy's build time T_B^H and
-    per-ray time t_R^H on the same rays, and the decision algorithm's probe (:func:`probe_grid`) on
-    random subsets of ``samples`` rays. All times are the calling thread's CPU seconds, kept as
-    median and minimum: builds over ``repeats`` builds after a warm-up (fewer above 100k
-    triangles), ray times over ``repeats`` interleaved grid / hierarchy rounds over all rays."""
-    with single_thread():
-        return _calibrate(scene, kinds, n_rays, samples, repeats, grid_factor, hiers, seed)
-
-
-def _calibrate(scene, kinds, n_rays, samples, repeats, grid_factor, hiers, seed) -> dict:
-    from tracer.scenes.rays import make_rays
-    t0 = time.perf_counter()
-    grid, T_BG, T_BG_wall = _timed_build(scene, "grid", {"factor": grid_factor}, repeats)
-    gs = grid.stats()
-    out = {"scene": scene.name, "N": scene.n, "grid_factor": grid_factor, "T_BG": T_BG, "T_BG_wall": T_BG_wall,
-           "refs_per_tri": gs["refs_per_tri"], "grid_res": gs["res"], **havran_stats(grid), "hier": {}, "kinds": {}}
-    brep = repeats if scene.n <= 100_000 else max(2, repeats // 2)
-    accs = {}
-    for h in hiers:
-        acc, T_BH, T_BH_wall = _timed_build(scene, h, {}, brep)
-        accs[h] = acc
-        st = acc.stats()
-        out["hier"][h] = {"T_BH": T_BH, "T_BH_wall": T_BH_wall, "nodes": st.get("nodes"), "depth": st.get("depth"),
-                          "refs_per_tri": st.get("refs", 0) / max(scene.n, 1)}
-    for kind in kinds:
-        rays = make_rays(scene, kind, n_rays, seed=seed)
-        o, d = rays.origins, rays.directions
-        fns = {"grid": lambda: grid.intersect(o, d, counters=False)}
-        fns.update({h: (lambda a=a: a.intersect(o, d, counters=False)) for h, a in accs.items()})
-        tm = paired_times(fns, repeats)
-        hits, cnt = grid.intersect(o, d, counters=True)
-        m = cnt.mean()
-        rec = {"rays": rays.n, "t_RG": {k: v / rays.n for k, v in tm["grid"].items()}, "box_frac_all": m["setups"],
-               "hit_frac_all": float((hits.tri_id >= 0).mean()), "steps_all": m["steps"], "tests_all": m["tests"],
-               "hier": {}, "samples": {}}
-        for h, a in accs.items():
-            _, c = a.intersect(o, d, counters=True)
-            hm = c.mean()
-            rec["hier"][h] = {"t_RH": {k: v / rays.n for k, v in tm[h].items()}, "nodes": hm["nodes"],
-                              "leaves": hm["steps"], "tests": hm["tests"]}
-        for j, s in enumerate(samples):
-            if s <= rays.n:
-                idx = np.random.default_rng(seed + 1 + j).permutation(rays.n)[:s]
-                rec["samples"][str(s)] = probe_grid(grid, rays, idx=idx)
-        out["kinds"][kind] = rec
-    out["seconds"] = time.perf_counter() - t0
-    return out
-
 
 
 def add_arguments(p) -> None:
@@ -155,59 +41,6 @@ def add_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--retest", action="store_true",
                    help="measure every scene a second time: test-retest repeatability of the times and R_C")
-
-
-def load_any(name: str):
-    """A named scene (mesh, procedural or SPD: one registry, :func:`tracer.scenes.scene.load_scene`) or a path."""
-    from tracer.scenes.scene import load_scene
-    return load_scene(name)
-
-
-def default_scenes(quick: bool) -> list[str]:
-    """--quick: :data:`QUICK`; else every named mesh, the procedural and SPD scenes and the stand-ins
-    matched to the paper's scenes (:data:`experiments.hapala.claims.STAND_INS`)."""
-    if quick:
-        return list(QUICK)
-    from tracer.scenes.scene import manifest
-    return sorted(manifest()) + PROCEDURAL + SPD + list(STAND_INS)
-
-
-def settings(args) -> dict:
-    quick = bool(getattr(args, "quick", False))
-    return {"rays": getattr(args, "rays", None) or (2_000 if quick else 10_000),
-            "repeats": getattr(args, "repeats", None) or (3 if quick else 7),
-            "grid_factor": float(getattr(args, "grid_factor", None) or GRID_FACTOR),
-            "seed": int(getattr(args, "seed", 0) or 0),
-            "samples": [s for s in SAMPLE_SIZES if s <= (getattr(args, "rays", None) or (2_000 if quick else 10_000))],
-            "hiers": ["kdtree", "bvh"]}
-
-
-#: the code (beside tracer/) that shapes a stored calibration point
-MEASURE_CODE = ("experiments/hapala/table1.py", "costmodel/select.py")
-
-
-def calibrate_named(name: str, cfg: dict) -> dict:
-    """:func:`calibrate_scene` of a named scene with the settings ``cfg`` (one task of the run)."""
-    scene = load_any(name)
-    return calibrate_scene(scene, KINDS, cfg["rays"], cfg["samples"], cfg["repeats"], cfg["grid_factor"],
-                           tuple(cfg["hiers"]), cfg["seed"])
-
-
-def measure_all(ctx, names, cfg: dict, log=print, repeat_pass: int = 1) -> list[dict]:
-    """Calibrate every scene (resumable: one stored point per scene and settings, keyed by the
-    measurement key of :class:`experiments.core.store.PointStore`); ``repeat_pass`` > 1 measures the
-    same again as an independent retest."""
-    store = ctx.store(code=MEASURE_CODE)
-    raw = []
-    for i, name in enumerate(progress(names, "table1h calibration", quiet=log is not print)):
-        key = {"target": "table1h", "scene": name, "kinds": list(KINDS), "protocol": PROTOCOL, **cfg}
-        if repeat_pass > 1:
-            key["pass"] = repeat_pass
-        t0 = time.perf_counter()
-        row, cached = store.measure(key, calibrate_named, name, cfg)
-        log(f"[{i + 1}/{len(names)}] {name}: N={row['N']:,} {'(stored)' if cached else f'{time.perf_counter() - t0:.1f} s'}")
-        raw.append(dict(row, provenance=store.provenance(key)))
-    return raw
 
 
 def table(raw: list[dict], hier: str = "kdtree") -> pd.DataFrame:
@@ -228,31 +61,6 @@ def table(raw: list[dict], hier: str = "kdtree") -> pd.DataFrame:
         e["stands_in_for"] = STAND_INS[r["scene"]][1] if r["scene"] in STAND_INS else None
         rows.append(e)
     return pd.DataFrame(rows).sort_values("N", kind="stable").reset_index(drop=True)
-
-
-def retest(raw, raw2) -> pd.DataFrame:
-    """Test-retest of two independent calibrations: per hierarchy and ray kind, the median |log ratio|
-    of each time, the share of scenes whose outcome (R_C finite or not) agrees, and Err of the second
-    R_C against the first (the floor any estimator is judged against)."""
-    from costmodel.select import rc_error
-    rows = []
-    for h in ("kdtree", "bvh"):
-        a, b = records(raw, hier=h), records(raw2, hier=h)
-        m = a.merge(b, on=["scene", "kind"], suffixes=("_a", "_b"))
-        for kind in KINDS:
-            k = m[m.kind == kind]
-            if not len(k):
-                continue
-            e = rc_error(k.R_C_b, k.R_C_a)
-            e = e[np.isfinite(e)]
-            row = {"hier": h, "kind": kind, "scenes": len(k),
-                   "outcome_agree": float((np.isfinite(k.R_C_a) == np.isfinite(k.R_C_b)).mean()),
-                   "n_err": int(e.size), "mean_abs_err": float(np.abs(e).mean()) if e.size else np.nan,
-                   "median_abs_err": float(np.median(np.abs(e))) if e.size else np.nan}
-            for q in ("T_BG", "T_BH", "t_RG", "t_RH", "t_RG_sample"):
-                row[f"{q}_pct"] = 100 * float(np.median(np.abs(np.log(k[f"{q}_b"] / k[f"{q}_a"]))))
-            rows.append(row)
-    return pd.DataFrame(rows)
 
 
 def retest_summary(rt: pd.DataFrame) -> str:

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from costmodel.derive import two_level_M1
 from costmodel.fit import ExponentFit, refine_minimum, work_cost
-from experiments.ize.table3 import cells_sweep
 from experiments.core.store import atomic_write
-from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, grid_cells, sweep
+from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, cells_sweep, grid_cells, sweep
 from tracer.scenes.rays import make_rays
 from tracer.scenes.scene import load_scene
 from tracer.measure.timing import set_threads
@@ -50,7 +50,7 @@ def two_level_best_m1(scene, n_rays: int = 10_000, seed: int = 0, points: int = 
     so the result is deterministic. Returns (best M1, [(M1, work), …])."""
     from tracer.accel import build
     r = make_rays(scene, "random", n_rays, seed=seed)
-    th = (8 * scene.n) ** 0.6
+    th = two_level_M1(scene.n)
     Ms = np.geomspace(th / 16, th * 16, points)
     work = []
     for M in Ms:

@@ -3,15 +3,14 @@ Eq 1 (compact) or Eq 5 (long skinny) curve, one panel per model. Uses the sweeps
 ``table3`` (run first when their results are missing)."""
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from costmodel.fit import GridCostFit
 from experiments.core.store import atomic_write, read_csv
+from experiments.core.target import ensure_input
 
 
 def add_arguments(p) -> None:
@@ -20,11 +19,8 @@ def add_arguments(p) -> None:
 
 def _load(ctx, args, target):
     path = Path(args.out) / target / f"{target}.csv"
-    if not path.exists():  # --force on a derived target re-derives; it does not re-measure its inputs
-        import importlib
-        mod = importlib.import_module(f"experiments.ize.{target}")
-        sub = argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None, "seed": 0})
-        mod.run(ctx, sub, log=lambda *a: None)
+    # --force on a derived target re-derives; it does not re-measure its inputs
+    ensure_input(ctx, args, target, path, log=lambda *a: None, scenes=None, rays=None, repeats=None, seed=0)
     return read_csv(path)
 
 

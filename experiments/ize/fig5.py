@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from experiments.core.store import atomic_write
-from experiments.ize import memmodel
+from experiments.ize.lib import memmodel
 from experiments.core.sweep import PAIRED_REPEATS, PAIRED_ROUNDS, paired_plane, sweep
 from tracer.scenes.rays import make_rays
 from tracer.scenes.scene import load_scene

@@ -6,17 +6,18 @@ helpful"). Per level count L the theory's M1 is re-timed side by side with the f
 the same L (penalty) and the best swept one-level grid (speed-up), as ``table4`` does."""
 from __future__ import annotations
 
-from functools import lru_cache
-
 import pandas as pd
 
 from experiments.core.common import add_ray_args, dash
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import grid_cells, paired_penalties, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
-from experiments.ize.table4 import PAPER as PAPER4
-from experiments.ize.table4 import PAPER_SPEEDUP
+from costmodel.derive_nested import d_level_m1
+from costmodel.papers import ize2007
 
+#: scene -> Table 4 as printed (model, N, empirical cells, theoretical cells, penalty %), and Sec 4.2's speed-ups
+PAPER4 = {r[0]: r[1:] for r in ize2007.TABLE4.rows}
+PAPER_SPEEDUP = {k: c.value for k, c in ize2007.TWO_LEVEL_GAIN.items()}
 SCENES = list(PAPER4) + ["particles-100k"]
 QUICK_SCENES = ["bunny-948", "particles-2000"]
 KINDS = ("random", "camera")
@@ -27,32 +28,6 @@ ONE_LEVEL_FACTORS, QUICK_ONE_LEVEL_FACTORS = [2.0, 4.0, 8.0, 16.0, 32.0], [2.0, 
 M1_STEPS, QUICK_M1_STEPS = range(-6, 7, 3), (-4, 0, 4)
 #: the paper's word on scattered data (Sec 4, abstract), no number
 SCATTERED = "particles"
-
-
-def paper_cells(result, n: int) -> float:
-    """A derived cell count (``result.optimum`` of :mod:`costmodel.derive_nested`) at the paper's
-    constants: every occupancy constant k, k_j = 1 (Sec 4.2: "setting it to 1 seemed to give the best
-    results") and Ti/Ts = 4 (Sec 2), for a scene of ``n`` triangles."""
-    return float(_paper_fn(result.name, result.optimum)(n))
-
-
-@lru_cache(maxsize=None)
-def _paper_fn(name: str, optimum):
-    import sympy as sp
-
-    from costmodel.derive import PAPER_TI_OVER_TS, N, Ti, Ts
-    ks = {s: 1 for s in optimum.free_symbols if s.name.startswith("k")}
-    return sp.lambdify(N, sp.simplify(optimum.subs({**ks, Ti: PAPER_TI_OVER_TS * Ts})), "math")
-
-
-def d_level_m1(n: int, levels: int) -> float:
-    """Top-level cells of an L-level grid, Ize 2007 Eq 16 (Eq 4 for L = 1, Eq 13 for L = 2, Eq 15 for L = 3):
-
-        M1 = (2 N k1^(2(L-1)) ... Ti/Ts)^(3/(2L+1))  ->  (8N)^(3/(2L+1))  with every k_j = 1, Ti/Ts = 4,
-
-    evaluated from the sympy optimum of :func:`costmodel.derive_nested.ize_eq16_d_level_top`."""
-    from costmodel.derive_nested import ize_eq16_d_level_top
-    return paper_cells(ize_eq16_d_level_top(levels), n)
 
 
 def level_params(levels: int, m1: float) -> dict:

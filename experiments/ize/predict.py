@@ -38,7 +38,6 @@ also held out (:func:`nested_selection`): a model picked on the other scenes onl
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -49,7 +48,8 @@ import pandas as pd
 
 from costmodel.memory import EntryRefsCostFit, MemoryCostFit, PaperCountFit, SceneCalibratedFit, aic, calibration_rows
 from experiments.core.store import atomic_write, read_csv
-from experiments.ize import memmodel
+from experiments.core.target import ensure_input
+from experiments.ize.lib import memmodel
 from tracer.errors import GridcostError
 
 SOURCES = (("table2", "table2/table2.csv"), ("table3", "table3/table3.csv"), ("exponents", "exponents/points.csv"))
@@ -72,10 +72,7 @@ def add_arguments(p) -> None:
 def load_sweeps(ctx, args) -> pd.DataFrame:
     """The random-ray one-level grid sweeps of this results folder (table2 is measured when missing)."""
     out = Path(args.out)
-    if not (out / SOURCES[0][1]).exists():
-        from experiments.ize import table2 as ize_table2
-        ize_table2.run(ctx, argparse.Namespace(**{**vars(args), "scenes": None, "rays": None, "repeats": None}),
-                       log=lambda *a: None)
+    ensure_input(ctx, args, "table2", out / SOURCES[0][1], log=lambda *a: None, scenes=None, rays=None, repeats=None)
     frames = []
     for src, rel in SOURCES:
         if (out / rel).exists():

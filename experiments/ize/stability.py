@@ -19,7 +19,6 @@ penalty: the two-level grid beats every one-level M).
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -27,8 +26,9 @@ import numpy as np
 import pandas as pd
 
 from costmodel.fit import CounterCostFit
-from experiments.ize import memmodel
+from experiments.ize.lib import memmodel
 from experiments.core.store import atomic_write, read_csv
+from experiments.core.target import ensure_input
 from tracer.accel.constants import IZE_M_FACTOR, PBRT_GRID_MAX_VOXELS, WALD_LAMBDA
 
 
@@ -39,7 +39,7 @@ def add_arguments(p) -> None:
 #: the two-level rule (a measured point of the nested grid, not a cell count on the one-level curve)
 TWO_LEVEL = "(8N)^0.6 two-level (Ize Eq 12-13, M2 = 8 N2)"
 TWO_LEVEL_PARAMS = {"levels": 2}
-#: the memory-aware rule (experiments.ize.memmodel: costmodel.memory's model, constants from the other scenes)
+#: the memory-aware rule (experiments.ize.lib.memmodel: costmodel.memory's model, constants from the other scenes)
 MEMORY_AWARE = "memory-aware (held-out constants)"
 #: ... with Tsetup, Ts0 and Ti refitted on three of the scene's swept points (costmodel.memory.SceneCalibratedFit)
 MEMORY_CALIBRATED = "memory-aware, 3 scene points"
@@ -48,7 +48,7 @@ MEMORY_CALIBRATED = "memory-aware, 3 scene points"
 def rule_cells(scene, ti_over_ts: float, memory: dict | None = None) -> dict:
     """Cell count of every one-level rule for ``scene`` (rule name -> M), and the model rules of
     ``memory`` (name -> M, e.g. :data:`MEMORY_AWARE` -> the M of
-    :func:`experiments.ize.memmodel.memory_aware_cells`), when given."""
+    :func:`experiments.ize.lib.memmodel.memory_aware_cells`), when given."""
     from tracer.accel.grid import res_pbrt, res_wald
     n = scene.n
     out = {"8N (Ize Eq 4, Ti/Ts = 4)": IZE_M_FACTOR * n,
@@ -85,10 +85,8 @@ def time_at(cells: np.ndarray, ns: np.ndarray, m: float) -> float:
 
 def _points(ctx, args) -> pd.DataFrame:
     path = Path(args.out) / "exponents" / "points.csv"
-    if not path.exists():  # --force on a derived target re-derives; it does not re-measure its inputs
-        from experiments.ize import exponents
-        exponents.main(ctx, argparse.Namespace(**{**vars(args), "families": None, "rays": None, "repeats": None,
-                                                  "seed": 0, "target": "exponents"}))
+    # --force on a derived target re-derives; it does not re-measure its inputs
+    ensure_input(ctx, args, "exponents", path, log=lambda *a: None, families=None, rays=None, repeats=None, seed=0)
     return read_csv(path)
 
 

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from costmodel.fit import CounterCostFit, GridCostFit, pooling_evidence, refine_minimum
-from experiments.ize import memmodel
+from costmodel.papers import ize2007
+from costmodel.fit import GridCostFit, counter_fits, refine_minimum
+from experiments.ize.lib import memmodel
 from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.store import read_csv
@@ -24,14 +25,8 @@ from experiments.core.target import begin, kind_rays, run_quiet
 from tracer.accel.constants import IZE_TI_OVER_TS
 from tracer.measure.timing import clock_name
 
-#: our scene, the paper's model, paper N, paper empirical M, paper theoretical M (8N), paper penalty %
-PAPER = [
-    ("bunny-948", "bunny", 948, 29172, 7584, 4),
-    ("bunny-69k", "bunny", 69451, 645028, 555608, 2),
-    ("dragon-11k", "buddha", 15536, 132848, 124288, 1),
-    ("dragon-871k", "buddha", 1087716, 4873932, 8701728, 3),
-    ("room", "conference", 282664, 1121514, 2261312, 5),
-]
+#: our scene, then Table 2 as printed: model, N, empirical M, theoretical M (8N), penalty %
+PAPER = ize2007.TABLE2.rows
 QUICK_SCENES = ["bunny-948", "dragon-11k"]
 KINDS = ("random", "camera")
 
@@ -144,15 +139,6 @@ def run(ctx, args, log=print) -> dict:
               fitted_ti_over_ts=ratio, fitted_ts_ns=cfit.ts_, fitted_ti_ns=cfit.ti_, fitted_ci=cfit.ci_,
               fit_cond=cfit.cond_)
     return {"table": tab, "fits": fit_df, "ratio": ratio}
-
-
-def counter_fits(df: pd.DataFrame) -> tuple:
-    """(pooled :class:`CounterCostFit`, :func:`pooling_evidence`, scene -> its own Ti/Ts) of the
-    random-ray rows of a one-level sweep (shared with ``table3``)."""
-    rnd = df[df.ray_kind == "random"]
-    cfit = CounterCostFit().fit(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
-    pool = pooling_evidence(rnd.scene.tolist(), rnd.steps, rnd.tests, rnd.anchored_ns_per_ray)
-    return cfit, pool, {s: f.ti_over_ts_ for s, f in pool["fits"].items()}
 
 
 def _verdict(tab, pool) -> str:

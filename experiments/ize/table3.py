@@ -7,21 +7,18 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from costmodel.fit import GridCostFit, refine_minimum
-from experiments.ize import memmodel, memprobe
-from experiments.ize.table2 import counter_fits
+from costmodel.papers import ize2007
+from costmodel.fit import GridCostFit, counter_fits, refine_minimum
+from experiments.ize.lib import memmodel, memprobe
 from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
-from experiments.core.sweep import fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
+from experiments.core.sweep import cells_sweep, fastest, nearest, paired_penalties, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
 from tracer.measure.memory import cache_bytes
 
-#: scene, paper N, paper empirical M, paper theoretical M, paper penalty %, paper speed-up, paper size x
-PAPER = [
-    ("capped-cylinder-196", 196, 16875, 21952, 0, 1.25, 14),
-    ("capped-cylinder-3996", 3996, 768337, 2020822, 3, 1.7, 63),
-    ("capped-cylinder-19996", 19996, 6591676, 22620629, 10, 2.0, 141),
-]
+#: scene, then Table 3 as printed (N, empirical M, theoretical M, penalty %) and Sec 3.2's speed-up and size
+#: ratio of 8N^1.5 over 8N
+PAPER = [r + tuple(c.value for c in ize2007.SKINNY_GAIN[r[0]]) for r in ize2007.TABLE3.rows]
 QUICK_SCENES = ["capped-cylinder-196", "capped-cylinder-996"]
 KINDS = ("random", "camera")
 
@@ -31,17 +28,11 @@ def add_arguments(p) -> None:
                  "rays per kind (default 50000; --quick 5000)")
 
 
-def cells_sweep(n: int, points: int) -> list[dict]:
-    """From N/2 to 4 x 8 N^1.5 on a log grid, always including 8N and 8N^1.5."""
-    grid = np.geomspace(0.5 * n, 32.0 * n**1.5, points)
-    return [{"cells": float(round(m))} for m in sorted(set(np.round(grid).tolist()) | {8.0 * n, round(8.0 * n**1.5)})]
-
-
 def run(ctx, args, log=print) -> dict:
     tr = begin(ctx, args, "table3", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads or 1, log=log)
     quick = tr.quick
     n_rays, repeats = tr.ray_budget(5_000, 50_000)
-    store = ctx.store(code=("experiments/ize/memprobe.py",))  # one point store shared by all targets
+    store = ctx.store(code=("experiments/ize/lib/memprobe.py",))  # one point store shared by all targets
     paper = {p[0]: p for p in PAPER}
     rows, scenes, rays = [], {}, {}
     for name, scene in tr.scenes():
@@ -146,7 +137,7 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
         lines.append(f"| {r.scene} | {r.ray_kind} | {r.eq5_mape_pct:.1f}% | {r.eq1_mape_pct:.1f}% | {r.eq5_r2:.3f} | {r.eq1_r2:.3f} |")
     lines += ["", "## Where the time of a large grid goes", "",
               "Ize's cost model charges Ts per step and Ti per test whatever the grid's size. Probed in this run "
-              "(`experiments/ize/memprobe.py`): T0 and the cost of an empty step from rays inside the cylinder's hollow "
+              "(`experiments/ize/lib/memprobe.py`): T0 and the cost of an empty step from rays inside the cylinder's hollow "
               "through three grid sizes, Ti from a one-cell grid. The count model T0 + Ts·steps + Ti·tests with these "
               "memory-free costs is set against each swept grid; the excess is what the counts do not explain "
               "(figure `paper_figs/table3_memory.png`).", "",
@@ -188,7 +179,7 @@ def _summary(tab, fit_df, ratio, cfit, n_rays, repeats, threads, pool) -> str:
 
 
 def _memory_split(store, df, scene, random_rays, quick) -> dict:
-    """Probe the memory-free costs (:mod:`experiments.ize.memprobe`) and split the time of the theory's
+    """Probe the memory-free costs (:mod:`experiments.ize.lib.memprobe`) and split the time of the theory's
     M and of the best M into the count model and the excess over it."""
     c, _ = store.ctx.run_task(store, memprobe.memory_free_costs, scene, random_rays, 20_000, 1_000, quick)
     k = df[(df.scene == scene.name) & (df.ray_kind == "random")].drop_duplicates("cells")

@@ -5,24 +5,19 @@ from __future__ import annotations
 
 import pandas as pd
 
+from costmodel.derive import two_level_M1
+from costmodel.papers import ize2007
 from costmodel.fit import refine_minimum
 from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.sweep import penalty_range, FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
-from experiments.ize import memmodel
-from experiments.ize.table2 import PAPER as PAPER2
+from experiments.ize.lib import memmodel
 
-#: scene -> (paper model, paper N, paper empirical total cells, paper theoretical total cells, penalty %)
-PAPER = {
-    "bunny-948": ("bunny", 948, 36016, 17315, 1),
-    "bunny-69k": ("bunny", 69451, 1863727, 747518, 2),
-    "dragon-11k": ("buddha", 15536, 132848, 215579, 1),
-    "dragon-871k": ("buddha", 1087716, 7308615, 10350245, 0),
-    "room": ("conference", 282664, 5194622, 2832557, 1),
-}
+#: scene -> Table 4 as printed: (model, N, empirical total cells, theoretical total cells, penalty %)
+PAPER = {r[0]: r[1:] for r in ize2007.TABLE4.rows}
 #: the paper's speed-ups are for the full-size models only
-PAPER_SPEEDUP = {"dragon-871k": 2.0, "room": 2.4}
+PAPER_SPEEDUP = {k: c.value for k, c in ize2007.TWO_LEVEL_GAIN.items()}
 QUICK_SCENES = ["bunny-948", "dragon-11k"]
 KINDS = ("random", "camera")
 
@@ -34,13 +29,13 @@ def add_arguments(p) -> None:
 
 def m1_sweep(n: int, quick: bool) -> list[dict]:
     """M1 from (8N)^0.6 / 16 to 16 (8N)^0.6 on a log grid (the theory's point included)."""
-    theory = (8.0 * n) ** 0.6
+    theory = two_level_M1(n)
     ks = range(-8, 9, 2) if quick else range(-8, 9)
     return [{"levels": 2, "m1": float(round(max(1.0, theory * 2.0 ** (k / 2)))), "m2_factor": 8.0} for k in ks]
 
 
 def run(ctx, args, log=print) -> dict:
-    tr = begin(ctx, args, "table4", (QUICK_SCENES, [p[0] for p in PAPER2]), threads=args.threads or 1, log=log)
+    tr = begin(ctx, args, "table4", (QUICK_SCENES, [r[0] for r in ize2007.TABLE2.rows]), threads=args.threads or 1, log=log)
     quick = tr.quick
     n_rays, repeats = tr.ray_budget(10_000, 100_000)
     store = ctx.store()
@@ -50,7 +45,7 @@ def run(ctx, args, log=print) -> dict:
         two = pd.DataFrame(sweep(scene, "nested", m1_sweep(scene.n, quick), rays, store, repeats, desc=f"table4 {name}"))
         r = two[two.ray_kind == "random"]
         best_m1 = refine_minimum(r.param_m1, r.anchored_ns_per_ray)
-        theory = float(round((8.0 * scene.n) ** 0.6))
+        theory = float(round(two_level_M1(scene.n)))
         two = pd.concat([two, pd.DataFrame(sweep(scene, "nested", [{"levels": 2, "m1": float(round(best_m1)), "m2_factor": 8.0},
                                                                      {"levels": 2, "m1": theory, "m2_factor": 8.0}],
                                                  rays, store, repeats, desc=f"table4 {name} (refine)"))], ignore_index=True)

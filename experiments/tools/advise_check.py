@@ -1,10 +1,10 @@
 """``advise-check``: does ``advise`` generalise to meshes it was never calibrated on?
 
-For each mesh (none of them in :data:`experiments.tools.advise.CALIBRATION` or the selector's built-in
+For each mesh (none of them in :data:`experiments.tools.lib.advising.CALIBRATION` or the selector's built-in
 calibration), each ray kind (random, camera) and each budget R (1e6, 1e8 rays), ``advise`` predicts
-every candidate's build and per-ray time (:func:`experiments.tools.advise.predict`), picks the
+every candidate's build and per-ray time (:func:`experiments.tools.lib.advising.predict`), picks the
 fastest predicted total, and then *every* candidate is built and timed
-(:func:`experiments.tools.advise.measure`: builds the median of 5 after a warm-up, per-ray times
+(:func:`experiments.tools.lib.advising.measure`: builds the median of 5 after a warm-up, per-ray times
 the median of 5 interleaved rounds of all candidates on the same fresh rays, one thread). The
 issue's goal per row: the pick is the measured fastest or within 10 % of it, and the pick's
 predicted total (build + R rays) is within 20 % of its measured total.
@@ -18,11 +18,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from experiments.core.store import atomic_write
-from experiments.tools import advise
+from experiments.tools.lib import advising as advise
 from tracer.measure.timing import set_threads
 
 #: mesh -> (kind of mesh, why it was chosen)

@@ -12,16 +12,17 @@ from __future__ import annotations
 
 import pandas as pd
 
+from costmodel.papers import wald2006
 from experiments.core.common import add_image_args
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
-from experiments.wald.fig6 import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
+from experiments.wald.lib.packets import constants_table, fit_note, loso_predictions, measure_points, model_X, pooled_fit
 
 PACKETS = (1, 2, 4, 8, 16, 32)
 SCENES = ["bunny-948", "bunny-3851", "bunny-16k", "bunny-69k", "dragon-11k", "dragon-48k"]
 QUICK_SCENES = ["bunny-948", "cornell"]
 #: the paper: 8 x 8 best below ~250K triangles, 4 x 4 above (1024 x 1024 pixels)
-PAPER_CROSSOVER_N = 250_000
+PAPER_CROSSOVER_N = wald2006.PACKET_CROSSOVER_N.value
 
 
 def add_arguments(p) -> None:
@@ -48,7 +49,7 @@ def run(ctx, args, log=print) -> dict:
     tr = begin(ctx, args, "wald-fig7", (QUICK_SCENES, SCENES), threads=args.threads or 1, log=log)
     side = tr.pick(args.side, 128, 512)
     repeats = args.repeats or 5
-    store = ctx.store(code=("experiments/wald/fig6.py",))
+    store = ctx.store(code=("experiments/wald/lib/packets.py",))
     rows = []
     for _, scene in tr.scenes("wald-fig7"):
         rows += measure_points(store, "wald-fig7", scene, [{"lam": float(args.lam), "packet": k} for k in PACKETS],

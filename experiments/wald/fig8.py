@@ -15,10 +15,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from costmodel.papers import wald2006
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
-from experiments.wald.fig6 import packet_work
-from experiments.wald.views import paired, wald_camera
+from experiments.wald.lib.packets import packet_work
+from experiments.wald.lib.views import paired, wald_camera
 from tracer.accel.packet import CoherentGrid
 from tracer.scenes.scene import load_scene
 from tracer.measure.timing import build_clock, clock_name, time_call
@@ -29,7 +30,7 @@ QUICK_LARGEST = "bunny-16k"
 QUICK_FAMILY = ["bunny-948", "bunny-3851"]
 LAMBDAS = (1.0, 5.0)
 #: the paper's Fig 8 reading (Thai Statue, 10M triangles): build / trace at lambda = 5
-PAPER_BUILD_OVER_TRACE = 3.0
+PAPER_BUILD_OVER_TRACE = wald2006.BUILD_OVER_TRACE.value
 
 
 def add_arguments(p) -> None:

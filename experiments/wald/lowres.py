@@ -18,9 +18,9 @@ import pandas as pd
 from experiments.core.common import add_image_args
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
-from experiments.wald.fig6 import model_X, packet_work, pooled_fit
-from experiments.wald.needs import needs_row
-from experiments.wald.views import paired, wald_camera
+from experiments.wald.lib.packets import model_X, packet_work, pooled_fit
+from experiments.wald.lib.needs import needs_row
+from experiments.wald.lib.views import paired, wald_camera
 from tracer.errors import GridcostError
 from tracer.accel.grid import UniformGrid
 from tracer.accel.packet import CoherentGrid
@@ -67,7 +67,7 @@ def measure(scene, side: int, rounds: int) -> dict:
            **packet_work(cgt, rays)}
     hits, cnt = own.intersect(o, d)
     row.update(single_tests=cnt.mean()["tests"], **needs_row(own, rays, hits.t, cgt.packet ** 2, scene.n))
-    # shares of a packet's work its rays' own walks would not do (experiments.wald.needs)
+    # shares of a packet's work its rays' own walks would not do (experiments.wald.lib.needs)
     row["refs_unneeded"] = 1 - row["need_refs"] / row["considered"]
     row["tests_unneeded"] = 1 - row["single_tests"] / row["tests"]
     return row
@@ -137,7 +137,7 @@ def _summary(df, fit, rounds) -> str:
              "per-round time ratios [min-max over rounds]. Work columns are per camera ray (about half the rays miss "
              "the model's box and cost only the clipping). The paper gives no Embree comparison; its Sec 4.2: 1024² "
              "to 2048² costs only 1.75-2.25x the time, not 4x.", "",
-             ("*Own walks* are what the packet's rays need (experiments.wald.needs): each ray's own 3D-DDA walk "
+             ("*Own walks* are what the packet's rays need (experiments.wald.lib.needs): each ray's own 3D-DDA walk "
              "through the same grid up to its closest hit, mailboxed (each triangle tested once per ray): its tests "
              "per ray, and per packet the references held by the distinct cells its rays' walks visit. *Unneeded*: "
              "the share of the references a packet considers that lie in cells none of its rays needs (1 - own "

@@ -15,21 +15,18 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from costmodel.papers import wald2006
 from experiments.core.common import add_image_args, dash
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
-from experiments.wald.views import paper_cell, scene_label, wald_camera
-from tracer.accel.packet import CoherentGrid
+from experiments.wald.lib.views import paper_cell, scene_label, wald_camera
+from experiments.wald.lib.packets import count_tests
 
 #: our scene, the paper's scene it stands in for, paper #tris, n/n, y/n, y/y (millions), kd-tree
-PAPER = [
-    ("bunny-69k", "ben", 78_000, 12.8, 6.0, 1.5, 1.1),
-    ("bunny-16k", "hand", 15_000, 12.5, 6.0, 0.93, 0.85),
-    ("dragon-11k", "toys", 11_000, 14.0, 8.7, 1.0, 0.82),
-    ("room", "conf", 274_000, 96.0, 53.9, 6.9, 3.7),
-]
+PAPER = [(r["scene"], r["paper_scene"], r["tris"], r["tests_nn_M"], r["tests_yn_M"], r["tests_yy_M"], r["kdtree_M"])
+         for r in wald2006.TABLE1.records()]
 QUICK_SCENES = ["bunny-948", "dragon-11k"]
-PAPER_RAYS = 1024 * 1024
+PAPER_RAYS = wald2006.IMAGE_SIDE.value ** 2
 
 
 def add_arguments(p) -> None:
@@ -37,20 +34,6 @@ def add_arguments(p) -> None:
     p.add_argument("--packet", type=int, default=4, help="packet size k (the paper: 4)")
     p.add_argument("--exact", action="store_true", help="exact triangle/cell insertion instead of bounding boxes")
     p.add_argument("--no-kdtree", action="store_true", help="skip the single-ray kd-tree column")
-
-
-def count_tests(scene, side: int, k: int, exact: bool, lam: float = 5.0, macro: int = 6) -> dict:
-    """Per-ray work of one counting traversal with k x k packets (shared with wald-table4)."""
-    rays = wald_camera(scene, side, k)
-    cgt = CoherentGrid(packet=k, lam=lam, exact=exact, macro=macro).build(scene)
-    pc = cgt.packet_counters(rays.origins, rays.directions)
-    n = rays.n
-    row = {"scene": scene.name, "N": scene.n, "packet": k, "side": side, "rays": n, "exact": exact,
-           "res": "x".join(str(v) for v in cgt.res_), "refs_per_tri": cgt.refs_ / scene.n,
-           "hits": float((pc["hits"].tri_id >= 0).mean()), "single_frac": pc["single"].sum() / n}
-    for c in ("slices", "cells", "considered", "tests_plain", "tests_mb", "tests_mb_fc", "culled"):
-        row[c] = pc[c].sum() / n
-    return row
 
 
 def kdtree_tests(scene, side: int) -> float:

@@ -19,22 +19,21 @@ import pandas as pd
 from experiments.core.common import add_image_args
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
-from experiments.wald.fig6 import packet_work
-from experiments.wald.table4 import PAPER as PAPER4
-from experiments.wald.views import paper_cell as _p
-from experiments.wald.views import light_position, paired, scene_label, shadow_rays, wald_camera
+from costmodel.papers import wald2006
+from experiments.wald.lib.packets import packet_work
+from experiments.wald.lib.views import paper_cell as _p
+from experiments.wald.lib.views import light_position, paired, scene_label, shadow_rays, wald_camera
 from tracer.accel.grid import UniformGrid
 from tracer.accel.packet import CoherentGrid
 from tracer.measure.timing import clock_name
 
 #: the paper's Table 3 (frames per second at 1024², 1 thread): paper scene -> (single-ray, 8x8 packets, ratio)
-PAPER = {"ben": (1.57, 10.6, 6.75), "hand": (1.59, 16.1, 10.1), "toys": (1.53, 20.0, 13.1),
-         "erw6": (0.67, 14.0, 20.9), "conf": (0.30, 3.2, 10.6)}
+PAPER = {r["paper_scene"]: (r["single_fps"], r["packet8_fps"], r["ratio"]) for r in wald2006.TABLE3.records()}
 #: our stand-in -> the paper's scene (wald-table4's list)
-STAND_IN = {p[0]: p[1] for p in PAPER4}
+STAND_IN = {r["scene"]: r["paper_scene"] for r in wald2006.TABLE4.records()}
 QUICK_SCENES = ["bunny-948", "cornell"]
 #: the paper's macrocell gain ("around 30%") and shadow-packet claim (Sec 4.7)
-PAPER_MACRO_GAIN = 1.30
+PAPER_MACRO_GAIN = 1 + wald2006.MACROCELL_GAIN_PCT.value / 100
 
 
 def add_arguments(p) -> None:
@@ -99,7 +98,7 @@ def _single_frac(cgt, o, d, tmax) -> float:
 
 
 def run(ctx, args, log=print) -> dict:
-    tr = begin(ctx, args, "wald-table3", (QUICK_SCENES, [p[0] for p in PAPER4]), threads=1, log=log)
+    tr = begin(ctx, args, "wald-table3", (QUICK_SCENES, list(STAND_IN)), threads=1, log=log)
     side = tr.pick(args.side, 128, 1024)
     rounds = args.repeats or 5
     rows = []

@@ -5,7 +5,7 @@ A ray *needs* the cells its own 3D-DDA walk visits up to its closest hit, and th
 cells reference: a single-ray grid traversal touches exactly these. A packet of k x k rays walks the
 cells its frustum's slices cover and tests the triangles they reference that survive mailboxing and
 frustum culling. :func:`packet_needs` counts, per packet of consecutive rays (the tile order of
-:func:`experiments.wald.views.wald_camera`), the distinct cells and triangles the packet's rays need;
+:func:`experiments.wald.lib.views.wald_camera`), the distinct cells and triangles the packet's rays need;
 :func:`needs_row` sets them beside the CGT's own per-packet counters, per ray:
 
 * ``need_refs`` against the packet's ``considered`` references: the share of the references a

@@ -99,7 +99,7 @@ def measure_around(res, repeats, leaf_size, branching) -> list[dict]:
     from tracer.accel.oracle import oracle_intersect
     from tracer.accel.sortedlists import SortedLists
     from tracer.measure.timing import build_clock, paired_ratio, time_paired
-    from experiments.fournier.scenes import around_again_primary, around_again_scene, secondary_rays
+    from experiments.fournier.lib.scenes import around_again_primary, around_again_scene, secondary_rays
     scene, kind = around_again_scene()
     o, d = around_again_primary(res)
     ref, _ = oracle_intersect(scene, o, d)
@@ -170,7 +170,7 @@ def around_summary(df) -> list[str]:
     lines = [
         "## Around Again: primary and secondary rays, lists vs the 30³ grid", "",
         f"Stand-in for the paper's scene (Fig. 11; {PAPER_AROUND['objects']:,} polygons: 25,426 triangles, 4,610 "
-        f"quadrilaterals, 636 larger polygons), built in `experiments/fournier/scenes.py`: 28 drink cans of 1,056 "
+        f"quadrilaterals, 636 larger polygons), built in `experiments/fournier/lib/scenes.py`: 28 drink cans of 1,056 "
         f"small triangles each ({int(first.cans_tris):,}), stacked and lying beside a ground and three walls "
         f"({int(first.long_polygons_tris)} long triangles), N = {int(first.N):,}. Rays: {n_p:,} primary rays "
         f"(a {int(first.res)}² pinhole image from inside the room), then from each primary hit one shadow ray to a "

@@ -1,0 +1,2 @@
+"""Helpers of the tool targets (not targets): the calibration, probes and predictions advise and
+advise-check share (advising)."""
