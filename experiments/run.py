@@ -11,6 +11,7 @@ exits non-zero.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import os
 import sys
@@ -62,7 +63,8 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "meshes shipped in tracer/data, the user cache, a download; `models` lists them)")
     p.add_argument("--threads", type=int, default=None, help="Numba threads (default: all cores)")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of text")
-    p.add_argument("--out", default="results", help="results directory (default: results)")
+    p.add_argument("--out", default=None, help="results directory (default: results; a --quick or otherwise "
+                                                 "reduced run: results/quick, so the committed results stay)")
     p.add_argument("--quick", action="store_true", help="fewer rays and sweep points (CI, first contact)")
     p.add_argument("--force", action="store_true", help="redo sweep points already stored")
     p.add_argument("--reuse-stale", action="store_true",
@@ -86,6 +88,42 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: every numeric option's range: dest -> (lowest, highest); None is unbounded. --threads is checked
+#: against this host's CPUs (:func:`_check_settings`).
+RANGES = {"seed": (0, None), "repeats": (1, 1000), "rays": (1, 1e10), "side": (1, 16384), "packet": (1, 64),
+          "grid_factor": (1e-6, 1e6), "trimesh_rays": (0, 1e8), "splits": (1, 1e6), "sample_rays": (1, 1e8),
+          "res": (1, 4096), "reps": (1, 1000), "nogrid_max": (0, None), "leaf_size": (1, 1024), "lam": (1e-6, 1e6),
+          "flat_max": (0, None), "eps": (0, 10), "branching": (2, 64), "around_res": (1, 4096)}
+
+
+def _check_settings(args) -> str | None:
+    """The first setting out of its range, as one line (None when all are fine)."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if args.threads is not None and not 1 <= args.threads <= cpus:
+        return f"--threads must be between 1 and {cpus} (this host's CPUs), got {args.threads}"
+    for dest, (lo, hi) in RANGES.items():
+        v = getattr(args, dest, None)
+        if v is None:
+            continue
+        if v != v or (lo is not None and v < lo) or (hi is not None and v > hi):
+            span = f"at least {lo:g}" if hi is None else f"between {lo:g} and {hi:g}"
+            return f"--{dest.replace('_', '-')} must be {span}, got {v:g}"
+    return None
+
+
+def _default_out(args) -> str:
+    """``results``, or ``results/quick`` for a reduced run of a paper target (``--quick``, or its
+    scenes, rays or repeats cut): a reduced sweep never overwrites the committed full results. Says
+    where it goes."""
+    reduced = getattr(args, "quick", False) or (
+        args.target in set(ALL_ORDER) | {"all"} and any(getattr(args, k, None) for k in ("scenes", "rays", "repeats")))
+    if not reduced:
+        return "results"
+    print("gridcost: a reduced run writes to results/quick (the committed results/ stay as they are; "
+          "--out results overwrites them)", file=sys.stderr)
+    return os.path.join("results", "quick")
+
+
 def _refuse_dirty(ctx, args) -> None:
     """``all`` into the default results/ must come from a clean commit (or say it did not)."""
     from experiments.core.store import REPO, git_commit
@@ -100,9 +138,10 @@ def _refuse_dirty(ctx, args) -> None:
 
 def _run_target(name: str, ctx, args) -> int:
     """One target with a fresh ledger; its summary marks stand-ins; the results index is rewritten."""
-    from experiments.core.store import write_index
+    from experiments.core.store import OutputGuard, write_index
     ctx.start_target()
-    rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
+    with OutputGuard(ctx.out / name, ctx.fig_dir, name):  # a failed run leaves the folder as it was
+        rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
     ctx.mark_stand_ins(ctx.out / name / "summary.md")
     ctx.mark_hosts(ctx.out / name / "summary.md")
     ctx.mark_noise(ctx.out / name)
@@ -126,6 +165,11 @@ def _failure(name: str, exc: BaseException, debug: bool) -> int:
     if isinstance(exc, GridcostError):
         print(f"error: {name}: {exc}", file=sys.stderr)
         return 2
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+        where = f" writing {exc.filename}" if exc.filename else ""
+        print(f"error: {name}: no space left on the device{where} ({exc.strerror}); free space or pass --out "
+              f"on another disk", file=sys.stderr)
+        return 2
     first = str(exc).splitlines()[0] if str(exc) else ""
     print(f"internal error in {name}: {type(exc).__name__}: {first} (--debug shows the traceback)", file=sys.stderr)
     return 1
@@ -134,6 +178,12 @@ def _failure(name: str, exc: BaseException, debug: bool) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Parse the command line, build the one :class:`RunContext`, run the target (or all)."""
     args = build_parser().parse_args(argv)
+    bad = _check_settings(args)
+    if bad:
+        print(f"error: {args.target}: {bad}", file=sys.stderr)
+        return 2
+    if args.out is None:
+        args.out = _default_out(args)
     if args.models:
         os.environ["GRIDCOST_MODELS"] = args.models
     ctx = None

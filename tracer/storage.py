@@ -8,6 +8,7 @@ error (the value is recomputed next time); results use the default and fail loud
 """
 from __future__ import annotations
 
+import errno
 import io
 import os
 import tempfile
@@ -34,19 +35,23 @@ def atomic_write(path, data: str | bytes, *, strict: bool = True, mode: int | No
     ``strict=False`` swallows an ``OSError`` (for caches); ``mode`` sets the file's permissions
     (``mkstemp`` creates files 0600)."""
     path = Path(path)
+    payload = data.encode() if isinstance(data, str) else data
     tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
+            f.write(payload)
         if mode is not None:
             os.chmod(tmp, mode)
         os.replace(tmp, path)
         tmp = None
-    except OSError:
-        if strict:
-            raise
+    except OSError as e:
+        if not strict:
+            return path
+        if e.errno in (errno.ENOSPC, errno.EDQUOT):  # name the file and what it needed (the CLI exits 2)
+            raise OSError(e.errno, f"{e.strerror}: {len(payload):,} bytes needed", str(path)) from e
+        raise
     finally:
         if tmp is not None and os.path.exists(tmp):
             os.unlink(tmp)

@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import subprocess
+import sys
 import time
 from importlib import metadata
 from pathlib import Path
@@ -163,9 +164,21 @@ class PointStore:
             return None
         try:
             rec = json.loads(p.read_text())
-        except (OSError, ValueError):
-            return None  # a corrupt point is measured again
-        return rec if isinstance(rec, dict) and "value" in rec else {"value": rec, "key": None, "provenance": {}}
+        except (OSError, ValueError) as exc:
+            return self._set_aside(p, f"unreadable ({type(exc).__name__})")
+        if not (isinstance(rec, dict) and {"value", "key", "provenance"} <= set(rec)):
+            return self._set_aside(p, "not a gridcost point (no value, key and provenance)")
+        return rec
+
+    def _set_aside(self, path: Path, why: str) -> None:
+        """Move a bad point file to ``points/set-aside/`` (kept for a look, never deleted), say so in
+        one line, and let the point be measured again."""
+        aside = self.dir / "set-aside"
+        aside.mkdir(parents=True, exist_ok=True)
+        dest = aside / f"{path.stem}.{time.strftime('%Y%m%dT%H%M%S')}{path.suffix}"
+        os.replace(path, dest)
+        print(f"gridcost: stored point {path} is {why}: moved to {dest}, measuring it again", file=sys.stderr)
+        return None
 
     def record(self, params: dict, ignore_force: bool = False):
         """The stored record ``{value, key, provenance, stale}`` for ``params``, or None when it
@@ -256,3 +269,52 @@ def write_index(out_dir, fig_dir) -> Path:
                      + (", ".join(f"[{f.name}]({os.path.relpath(f, out_dir)})" for f in fig) or "–") + " | "
                      + _measured_by(d) + " |")
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")
+
+
+class OutputGuard:
+    """A target's outputs as they were before its run, put back if the run fails.
+
+    On entry every file of ``folder`` and every ``fig_dir/<name>.*`` is hard-linked into a hidden
+    folder beside it (no bytes copied, so it works on a full disk; atomic writes give the new files
+    new inodes, so the links keep the old contents). On an exception the run's files are removed and
+    the old ones put back; on success the links are dropped."""
+
+    def __init__(self, folder: Path, fig_dir: Path | None = None, name: str = ""):
+        self.folder, self.fig_dir, self.name = Path(folder), fig_dir, name or Path(folder).name
+        self.keep = self.folder.parent / f".{self.folder.name}.before"
+
+    def _figs(self) -> list:
+        return sorted(self.fig_dir.glob(f"{self.name}.*")) if self.fig_dir is not None and self.fig_dir.is_dir() else []
+
+    def __enter__(self):
+        import shutil
+        shutil.rmtree(self.keep, ignore_errors=True)
+        self.had_folder = self.folder.is_dir()
+        self.old_figs = {}
+        try:
+            if self.had_folder:
+                shutil.copytree(self.folder, self.keep / "folder", copy_function=os.link)
+            for f in self._figs():
+                (self.keep / "figs").mkdir(parents=True, exist_ok=True)
+                os.link(f, self.keep / "figs" / f.name)
+                self.old_figs[f.name] = f
+        except OSError:  # no snapshot (a filesystem without hard links): the run goes ahead unguarded
+            shutil.rmtree(self.keep, ignore_errors=True)
+            self.had_folder, self.old_figs, self.keep = None, {}, None
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        import shutil
+        if self.keep is None:
+            return False
+        if exc_type is not None and self.had_folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
+            if self.had_folder:
+                os.replace(self.keep / "folder", self.folder)
+            for f in self._figs():
+                if f.name not in self.old_figs:
+                    f.unlink()
+            for nm, f in self.old_figs.items():
+                os.replace(self.keep / "figs" / nm, f)
+        shutil.rmtree(self.keep, ignore_errors=True)
+        return False

@@ -11,11 +11,51 @@ file changes, while our kernels inline ``geometry.ray_triangle``, ``dda_setup`` 
 running old machine code. Every kernel is decorated through :func:`jit` / :func:`pjit`, which point
 Numba at that folder at decoration time (when Numba picks a function's cache locator).
 """
+import os
+import sys
+
 from numba import config, njit
+from numba.core import caching
 
 from tracer.measure.provenance import numba_cache_dir
 
 CACHE_DIR = str(numba_cache_dir())
+
+
+def _dropped(cache_file, exc) -> None:
+    """An unreadable cache entry (a kill or a full disk mid-write): its index goes, so Numba compiles
+    the function again and writes a fresh entry; one line says so."""
+    path = cache_file._index_path
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+    print(f"gridcost: dropped an unreadable compiled-kernel cache entry {path} ({type(exc).__name__}); "
+          "recompiling it", file=sys.stderr)
+
+
+def _healing(load_index, load):
+    """Numba's cache reads, with an unreadable file treated as a miss instead of a crash."""
+    def _load_index(self):
+        try:
+            return load_index(self)
+        except Exception as exc:  # truncated or foreign pickle: UnpicklingError, EOFError, ValueError...
+            _dropped(self, exc)
+            return {}
+
+    def _load(self, key):
+        try:
+            return load(self, key)
+        except Exception as exc:
+            _dropped(self, exc)
+            return None
+    return _load_index, _load
+
+
+if not getattr(caching.IndexDataCacheFile, "_gridcost_heals", False):  # once per process, on first import
+    caching.IndexDataCacheFile._load_index, caching.IndexDataCacheFile.load = _healing(
+        caching.IndexDataCacheFile._load_index, caching.IndexDataCacheFile.load)
+    caching.IndexDataCacheFile._gridcost_heals = True
 _OPTIONS = dict(cache=True, fastmath=False, error_model="numpy", nogil=True)
 
 

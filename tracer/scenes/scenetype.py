@@ -72,7 +72,7 @@ def scene_bounds(tris: np.ndarray) -> np.ndarray:
 
 
 def validate(tris: np.ndarray, where: str) -> dict:
-    """Refuse empty or non-finite meshes; count (keep) zero-area triangles."""
+    """Refuse empty, non-finite and all-degenerate meshes; count (keep) zero-area triangles."""
     if tris.size == 0:
         raise GridcostError(f"{where}: mesh is empty (0 triangles)")
     bad = ~np.isfinite(tris).all(axis=(1, 2))
@@ -81,4 +81,10 @@ def validate(tris: np.ndarray, where: str) -> dict:
                             f"(first: triangle {int(np.flatnonzero(bad)[0])})")
     t = tris.astype(np.float64)
     area2 = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    return {"degenerate": int((area2 == 0).sum())}
+    degenerate = int((area2 == 0).sum())
+    if degenerate == len(tris):
+        raise GridcostError(f"{where}: all {degenerate:,} triangles are degenerate (zero area: collinear or repeated "
+                            "vertices); no ray can hit this mesh")
+    # kept, not dropped: triangle ids stay the file's, and a zero-area triangle is never hit (it costs
+    # a test when a ray meets its cells); the count travels in the load report
+    return {"degenerate": degenerate}
