@@ -47,6 +47,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "table3": ("experiments.ize.table3", "Ize Table 3: long skinny triangles (cylinders), M = 8N^1.5 vs swept"),
     "advise": ("experiments.tools.advise", "which structure to build for your mesh and ray budget: predicted build + trace times, pick, --check"),
     "advise-check": ("experiments.tools.advise_check", "advise on four meshes outside its calibration: pick vs measured best, predicted vs measured totals"),
+    "certs": ("experiments.tools.certs", "a private CA and a node certificate for a TLS Dask sweep (--tls DIR)"),
     "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 
@@ -74,7 +75,13 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="let `all` write into the default results/ from a tree with uncommitted changes (recorded)")
     p.add_argument("--debug", action="store_true", help="show the traceback of an internal error")
     p.add_argument("--dask", default=None, metavar="ADDRESS",
-                   help="send sweep points to a Dask scheduler (tcp://host:8786, or 'local' for a LocalCluster)")
+                   help="send sweep points to a Dask scheduler (tls://host:8786 with --tls; tcp:// on loopback; "
+                        "'local' for a LocalCluster of 2 worker processes)")
+    p.add_argument("--tls", default=None, metavar="DIR",
+                   help="certificate folder for mutual TLS with the Dask scheduler (made by `gridcost certs`)")
+    p.add_argument("--insecure", action="store_true",
+                   help="allow a plain tcp:// scheduler beyond loopback: anyone who reaches its port can run code "
+                        "on every worker")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -51,7 +51,8 @@ class RunContext:
                   force=bool(getattr(args, "force", False)), reuse_stale=bool(getattr(args, "reuse_stale", False)))
         if getattr(args, "dask", None):
             from experiments.core.executor import DaskExecutor
-            executor = DaskExecutor(args.dask, ctx)
+            executor = DaskExecutor(args.dask, ctx, tls=getattr(args, "tls", None),
+                                    insecure=bool(getattr(args, "insecure", False)))
             ctx.executor = executor
         return ctx
 

@@ -149,20 +149,28 @@ class DaskExecutor:
 
     name = "dask"
 
-    def __init__(self, address: str, ctx=None):
+    def __init__(self, address: str, ctx=None, tls=None, insecure: bool = False):
+        """``tls``: a certificate folder (:mod:`experiments.core.tls`): mutual TLS with the scheduler
+        (required for a scheduler beyond loopback unless ``insecure``); with ``address='local'`` the
+        local cluster uses it too."""
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError:
             from tracer.errors import GridcostError
             raise GridcostError("Dask is not installed: pip install 'gridcost[dask]'") from None
+        from experiments.core import tls as tls_mod
         self.ctx = ctx
         os.environ["GRIDCOST_CLOCK"] = "wall"
+        sec = tls_mod.security(tls) if tls is not None else None
         if address == "local":
-            self.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
-            self.client = Client(self.cluster)
+            kw = {"security": sec, "protocol": "tls://"} if sec is not None else {}
+            self.cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                        host="127.0.0.1", **kw)
+            self.client = Client(self.cluster, security=sec) if sec is not None else Client(self.cluster)
         else:
+            tls_mod.check_address(address, tls, insecure)
             self.cluster = None
-            self.client = Client(address)
+            self.client = Client(address, security=sec, timeout=30) if sec is not None else Client(address, timeout=30)
 
     def map(self, specs: Iterable[dict], scenes: dict | None = None) -> Iterator[tuple[dict, list[dict]]]:
         from dask.distributed import as_completed
