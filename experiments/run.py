@@ -48,6 +48,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "advise": ("experiments.tools.advise", "which structure to build for your mesh and ray budget: predicted build + trace times, pick, --check"),
     "advise-check": ("experiments.tools.advise_check", "advise on four meshes outside its calibration: pick vs measured best, predicted vs measured totals"),
     "certs": ("experiments.tools.certs", "a private CA and a node certificate for a TLS Dask sweep (--tls DIR)"),
+    "scorecard": ("experiments.tools.scorecard", "every paper claim beside ours with a verdict (reproduced, explained, contradicted, not measurable), from the paper data and results/"),
     "models": ("experiments.tools.models", "every named scene: faces, where it was found or how to get it, licence"),
 }
 
@@ -55,7 +56,7 @@ TARGETS: dict[str, tuple[str, str]] = {
 ALL_ORDER = ["derive", "table2", "table3", "table4", "ize-levels", "ize-skinny2", "fig2", "fig5", "exponents", "stability",
              "table1h", "fig1h", "fig2h", "predict", "selector", "havran", "wald-table1", "wald-table3", "wald-table4",
              "wald-fig6", "wald-fig7", "wald-fig8", "wald-lowres",
-             "fournier-table1", "advise-check"]
+             "fournier-table1", "advise-check", "scorecard"]
 
 
 def _common(p: argparse.ArgumentParser) -> None:
