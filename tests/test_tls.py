@@ -6,7 +6,6 @@ import stat
 import pytest
 
 from experiments.core.tls import check_address
-from tracer.scenes.scene import load_scene
 from tracer.errors import GridcostError
 
 
