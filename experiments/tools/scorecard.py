@@ -90,6 +90,14 @@ def _csv(out: Path, rel: str) -> pd.DataFrame | None:
     return pd.read_csv(p) if p.exists() else None
 
 
+def _match(df: pd.DataFrame | None, column: str, value):
+    """The first row of ``df`` whose ``column`` is ``value`` (None when the frame or the row is missing)."""
+    if df is None or column not in df:
+        return None
+    hit = df[df[column] == value]
+    return None if hit.empty else hit.iloc[0]
+
+
 def _range(text) -> tuple:
     """``"1.2–3.4"`` (a summary's range column) -> (1.2, 3.4); anything else -> (None, None)."""
     try:
@@ -122,11 +130,10 @@ def ize_rows(out: Path) -> list[dict]:
     t2, pts2 = _csv(out, "table2/table2_summary.csv"), _csv(out, "table2/table2.csv")
     for r in ize2007.TABLE2.records():
         c = ize2007.TABLE2.cell(_index(ize2007.TABLE2, r["scene"]), "penalty_pct")
-        s = None if t2 is None else t2[t2.scene == r["scene"]]
-        if s is None or s.empty:
+        s = _match(t2, "scene", r["scene"])
+        if s is None:
             rows.append(missing(P, "Table 2", f"penalty of M = 8N on {r['scene']}", c, "table2"))
             continue
-        s = s.iloc[0]
         lo, hi = _range(s.penalty_8N_range)
         rows.append(row(P, "Table 2", f"penalty of M = 8N on {r['scene']} ({r['model']})", c, float(s.penalty_8N_pct),
                         lo, hi, target="table2", cf=_work_penalty(pts2, r["scene"], 8.0 * r["N"]),
@@ -140,11 +147,10 @@ def ize_rows(out: Path) -> list[dict]:
     sk = _csv(out, "ize-skinny2/skinny2_summary.csv")
     for scene, c in (("capped-cylinder-196", ize2007.SKINNY_TWO_LEVEL_GAIN["capped-cylinder-196"]),
                      ("capped-cylinder-3996", ize2007.SKINNY_TWO_LEVEL_GAIN["capped-cylinder-1996"])):
-        s = None if sk is None else sk[sk.scene == scene]
-        if s is None or s.empty:
+        s = _match(sk, "scene", scene)
+        if s is None:
             rows.append(missing(P, "Sec 4.4", f"Eq 17 rule over the compact rule on {scene}", c, "ize-skinny2"))
             continue
-        s = s.iloc[0]
         lo, hi = _range(s.skinny_speedup_range)
         cf = (s.compact_steps + TI_OVER_TS * s.compact_tests) / (s.skinny_steps + TI_OVER_TS * s.skinny_tests)
         rows.append(row(P, "Sec 4.4", f"Eq 17 two-level rule over the compact rule on {scene}", c,
@@ -193,12 +199,11 @@ def _ize_table3(out: Path, P: str) -> list[dict]:
     for i, r in enumerate(ize2007.TABLE3.records()):
         c = ize2007.TABLE3.cell(i, "penalty_pct")
         faster, larger = ize2007.SKINNY_GAIN[r["scene"]]
-        s = None if t3 is None else t3[t3.scene == r["scene"]]
-        if s is None or s.empty:
+        s = _match(t3, "scene", r["scene"])
+        if s is None:
             rows += [missing(P, "Table 3", f"penalty of 8N^1.5 on {r['scene']}", c, "table3"),
                      missing(P, "Sec 3.2", f"8N^1.5 over 8N on {r['scene']}", faster, "table3")]
             continue
-        s = s.iloc[0]
         rows.append(row(P, "Table 3", f"penalty of M = 8N^1.5 on {r['scene']}", c, float(s.penalty_pct),
                         target="table3", cf=_work_penalty(pts, r["scene"], float(s.theory_M)),
                         cf_how="steps + 4 tests at 8N^1.5 over the swept minimum"))
@@ -220,11 +225,10 @@ def _ize_table4(out: Path, P: str) -> list[dict]:
     rows, t4, pts = [], _csv(out, "table4/table4_summary.csv"), _csv(out, "table4/table4.csv")
     for i, r in enumerate(ize2007.TABLE4.records()):
         c = ize2007.TABLE4.cell(i, "penalty_pct")
-        s = None if t4 is None else t4[t4.scene == r["scene"]]
-        if s is None or s.empty:
+        s = _match(t4, "scene", r["scene"])
+        if s is None:
             rows.append(missing(P, "Table 4", f"penalty of (8N)^0.6 on {r['scene']}", c, "table4"))
             continue
-        s = s.iloc[0]
         lo, hi = _range(s.penalty_range)
         cf = float("nan")
         if pts is not None:
@@ -257,10 +261,9 @@ def hapala_rows(out: Path) -> list[dict]:
     t1 = _csv(out, "table1h/table1h.csv")
     for i, r in enumerate(hapala2011.TABLE1.records()):
         c = hapala2011.TABLE1.cell(i, "R_C_random")
-        s = None if t1 is None else t1[t1.paper_scene == r["scene"]] if "paper_scene" in t1 else None
-        if s is None or s.empty:
+        s = _match(t1, "paper_scene", r["scene"])
+        if s is None:
             continue  # the paper's scenes we have no model for are not rows
-        s = s.iloc[0]
         ours = float(s.R_C_random)
         dp, do = r["t_RG_us_random"] - r["t_RH_us_random"], float(s.t_RG_us_random - s.t_RH_us_random)
         why = (f"R_C = T_B^H / (t_R^G - t_R^H): our kd-tree build is {float(s.T_BH_ms) / r['T_BH_ms']:.2g}x the "
@@ -272,11 +275,11 @@ def hapala_rows(out: Path) -> list[dict]:
         rows.append(v)
     cl = _csv(out, "table1h/claims.csv")
     for claim, cites in (("build slowdown", hapala2011.BUILD_SLOWDOWN_PCT), ("speed-up", hapala2011.LOG_RAYS_SPEEDUP)):
-        s = None if cl is None else cl[cl.claim.str.contains(claim.split()[0])]
-        if s is None or s.empty:
+        hit = None if cl is None else cl[cl.claim.str.contains(claim.split()[0])]
+        if hit is None or hit.empty:
             rows.append(missing(P, "Sec 3", f"{claim} of the combined method (mean)", cites[0], "table1h"))
             continue
-        s = s.iloc[0]
+        s = hit.iloc[0]
         rows.append(row(P, "Sec 3", f"{claim} of the combined method, mean over scenes ({s.claim})", cites[0],
                         float(s["mean"]), float(s["min"]), float(s["max"]), target="table1h",
                         cf=float(s.paper_table_mean), cf_how="the same formula on the paper's own Table 1"))
@@ -301,21 +304,20 @@ def wald_rows(out: Path) -> list[dict]:
     t1 = _csv(out, "wald-table1/table1.csv")
     for i, r in enumerate(wald2006.TABLE1.records()):
         c = wald2006.TABLE1.cell(i, "ratio_nn_yy")
-        s = None if t1 is None else t1[t1.scene == r["scene"]]
-        if s is None or s.empty:
+        s = _match(t1, "scene", r["scene"])
+        if s is None:
             rows.append(missing(P, "Table 1", f"tests cut by mailboxing + culling on {r['scene']}", c, "wald-table1"))
             continue
         rows.append(row(P, "Table 1", f"tests cut by mailboxing + frustum culling, {r['scene']} ({r['paper_scene']})",
-                        c, float(s.iloc[0].total_factor), target="wald-table1",
+                        c, float(s.total_factor), target="wald-table1",
                         stand_in=f"{r['scene']} for {r['paper_scene']}"))
     t3, t4 = _csv(out, "wald-table3/table3.csv"), _csv(out, "wald-table4/table4.csv")
     for i, r in enumerate(wald2006.TABLE3.records()):
         c = wald2006.TABLE3.cell(i, "ratio")
-        s = None if t3 is None else t3[t3.scene == r["scene"]]
-        if s is None or s.empty:
+        s = _match(t3, "scene", r["scene"])
+        if s is None:
             rows.append(missing(P, "Table 3", f"8x8 packets over the single-ray grid on {r['scene']}", c, "wald-table3"))
             continue
-        s = s.iloc[0]
         cf = float("nan")
         q = None if t4 is None else t4[t4.scene == r["scene"]]
         if q is not None and len(q):
@@ -335,12 +337,12 @@ def wald_rows(out: Path) -> list[dict]:
     for i, r in enumerate(wald2006.TABLE4.records()):
         for k in ("4", "8"):
             c = wald2006.TABLE4.cell(i, f"ratio_{k}")
-            s = None if t4 is None else t4[t4.scene == r["scene"]]
-            if s is None or s.empty:
+            s = _match(t4, "scene", r["scene"])
+            if s is None:
                 rows.append(missing(P, "Table 4", f"cells visited, single / {k}x{k}, {r['scene']}", c, "wald-table4"))
                 continue
             rows.append(row(P, "Table 4", f"cells visited, single ray / {k}x{k} packets, {r['scene']} ({r['paper_scene']})",
-                            c, float(s.iloc[0][f"cell_ratio_{k}x{k}"]), target="wald-table4",
+                            c, float(s[f"cell_ratio_{k}x{k}"]), target="wald-table4",
                             stand_in=f"{r['scene']} for {r['paper_scene']}"))
     b6 = _csv(out, "wald-fig6/best.csv")
     rows.append(missing(P, "Fig 6", "best lambda", wald2006.LAMBDA, "wald-fig6") if b6 is None else
@@ -374,22 +376,22 @@ def fournier_rows(out: Path) -> list[dict]:
         for col, ours_col, what in (("list_tests", "isect", "intersections per ray"),
                                     ("list_events", "events", "events per ray")):
             c = fournier1993.TABLE1.cell(i, col)
-            s = None if t1 is None else t1[t1.paper_scene == r["label"]]
-            if s is None or s.empty:
+            s = _match(t1, "paper_scene", r["label"])
+            if s is None:
                 rows.append(missing(P, "Table 1", f"sorted lists: {what}, {r['label']}", c, "fournier-table1"))
                 continue
             rows.append(row(P, "Table 1", f"sorted lists, no hierarchy: {what}, {r['label']} ({r['scene']})", c,
-                            float(s.iloc[0][ours_col]), target="fournier-table1",
+                            float(s[ours_col]), target="fournier-table1",
                             stand_in="SPD scenes made of triangles, not of spheres and polygons"))
     aa = _csv(out, "fournier-table1/around_again.csv")
     for key, struct in (("grid_over_min", "grid30"), ("lists_over_min", "sl-hier")):
         c = fournier1993.AROUND[key]
-        s = None if aa is None else aa[(aa.structure == struct) & (aa.ray_kind == "primary")]
-        if s is None or s.empty:
+        s = _match(None if aa is None else aa[aa.ray_kind == "primary"], "structure", struct)
+        if s is None:
             rows.append(missing(P, "Results", f"Around Again: {struct} tests over the minimum", c, "fournier-table1"))
             continue
         rows.append(row(P, "Results (Around Again)", f"{struct}: tests over the minimum, primary rays", c,
-                        float(s.iloc[0].tests_over_min), target="fournier-table1",
+                        float(s.tests_over_min), target="fournier-table1",
                         stand_in="our reconstruction of Around Again from its published description"))
     return rows
 
