@@ -10,8 +10,10 @@ IZE_M1_EXPONENT = 0.6
 PBRT_GRID_VOXELS_PER_CUBE_ROOT = 3.0
 PBRT_GRID_MAX_VOXELS = 64
 
-#: pbrt-v2 KdTreeAccel SAH (Chuang 2006 slides): isect cost 80, traversal cost 1, empty bonus 0.5,
-#: max depth 8 + 1.3 log2 N, max primitives per leaf 1.
+#: pbrt's KdTreeAccel SAH: the constructor defaults ``isectCost = 80, traversalCost = 1,
+#: emptyBonus = 0.5, maxPrims = 1`` (pbrt-v3 ``src/accelerators/kdtreeaccel.h``; the same in pbrt-v2's
+#: ``accelerators/kdtreeaccel.cpp``) and ``maxDepth = round(8 + 1.3 Log2Int(N))`` when it is not given
+#: (``kdtreeaccel.cpp``); Pharr, Jakob & Humphreys, PBR 3rd ed., Sec 4.4.2. Chuang's 2006 slides quote them.
 PBRT_KD_ISECT_COST = 80.0
 PBRT_KD_TRAVERSAL_COST = 1.0
 PBRT_KD_EMPTY_BONUS = 0.5
