@@ -57,7 +57,7 @@ def test_a_wrong_value_or_quote_is_caught():
 
 def test_tables_read_by_our_scene():
     from costmodel.papers import ize2007
-    row = ize2007.TABLE2.by_key()["room"]
+    row = ize2007.TABLE2.by_key()["conference-room"]
     assert (row["model"], row["N"], row["theoretical_M"]) == ("conference", 282664, 2261312)
     assert ize2007.TABLE2.cell(4, "penalty_pct").value == 5
-    assert ize2007.TWO_LEVEL_GAIN["room"].cite() == "2.4× (Sec 4.2)"
+    assert ize2007.TWO_LEVEL_GAIN["conference-room"].cite() == "2.4× (Sec 4.2)"

@@ -508,3 +508,24 @@ def test_use_cache_false_writes_nothing(write_mesh, bunny):
     scene = load_mesh(path, use_cache=False)
     assert scene.n == 30
     assert (set(cdir.glob("*")) if cdir.exists() else set()) == before
+
+
+def test_conference_room_is_a_closed_hall_seen_from_inside():
+    """The conference room's character: about 280k triangles, a closed box around small detail, and a
+    camera standing inside it; every ray leaving the eye hits something (walls, floor, ceiling)."""
+    import numpy as np
+
+    from tracer.accel import build
+    from tracer.scenes.rays import camera_frame, make_rays
+    from tracer.scenes.scene import load_scene
+    scene = load_scene("conference-room")
+    assert 250_000 <= scene.n <= 310_000
+    eye = camera_frame(scene)[0]
+    lo, hi = scene.bounds.astype(float)
+    assert ((eye > lo + 0.2) & (eye < hi - 0.2)).all()  # inside the hall, under the ceiling
+    d = np.random.default_rng(0).normal(size=(2000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    hits, _ = build(scene, "grid", factor=1.0).intersect(np.broadcast_to(eye, d.shape).copy(), d, counters=False)
+    assert (hits.tri_id >= 0).all()
+    cam = make_rays(scene, "camera", 4096, seed=0)
+    assert np.allclose(cam.origins, eye, atol=1e-4)

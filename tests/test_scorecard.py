@@ -53,5 +53,5 @@ def test_scorecard_covers_every_table_and_figure_from_committed_results(tmp_path
     assert set(df.verdict) <= {"reproduced", "explained", "contradicted", "not measurable here"}
     fig8 = df[df.artefact == "Fig 8"].iloc[0]
     assert fig8.verdict == "not measurable here" and "gridcost wald-fig8" in fig8.explanation
-    room = df[(df.artefact == "Sec 4.2") & df.claim.str.contains("room")].iloc[0]
+    room = df[(df.artefact == "Sec 4.2") & df.claim.str.contains("conference-room")].iloc[0]
     assert room.paper_value == 2.4 and "conference room" in room.quote

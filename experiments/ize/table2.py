@@ -4,7 +4,7 @@ found by sweeping M from N/8 to 64N; penalty = extra time of the theoretical M o
 
 Rays: random rays (two uniform points on the bounding sphere, the theory's assumption) and camera
 rays as a second column. Stand-ins: the dragon at 11K / 871K triangles for the Happy Buddha
-(15,536 / 1,087,716) and the procedural ``room`` for the conference room (282,664).
+(15,536 / 1,087,716) and the procedural ``conference-room`` (a closed hall with furniture) for the conference room.
 """
 from __future__ import annotations
 
@@ -238,7 +238,7 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
               f"kappa still from the other scenes) it puts M within {worst_cal:.1f} %: a step's and a test's cost "
               "differ from scene to scene by more than any counter of the other scenes predicts (the AIC above), "
               "and three timed points of the scene pin them. `predict` says per scene which model its data need."
-              " Dragon and room stand in for Buddha and the conference room, so their N and M differ from "
+              " Dragon and conference-room stand in for Buddha and the conference room, so their N and M differ from "
               "the paper's rows by construction.", "",
               f"Noise: the swept points scatter about the fitted Eq 1 curve by {noise:.1f} % (median MAPE below), "
               "and the swept minimum, being the lowest of many noisy points, is biased low, so a swept penalty is "

@@ -48,9 +48,9 @@ PATTERNS = {
     "boxes": re.compile(r"^boxes-(\d+)$"),
     "surfpoints": re.compile(r"^surfpoints-(\d+)(k?)$"),
 }
-FIXED = ("teapot-in-stadium", "room")
+FIXED = ("teapot-in-stadium", "room", "conference-room")
 EXAMPLES = ["cylinder-196", "cylinder-3996", "cylinder-19996", "capped-cylinder-3996", "particles-100k", "teapot-in-stadium",
-            "room", "sphere-20k", "knot-50k", "boxes-2000"]
+            "room", "conference-room", "sphere-20k", "knot-50k", "boxes-2000"]
 
 
 def names() -> list[str]:
@@ -79,6 +79,9 @@ def make(spec: str, mesh: Callable[[str], Scene | None] | None = None) -> Scene:
         return Scene(tris, spec, "procedural", report={"teapot_triangles": n_pot}, view=view)
     if spec == "room":
         return Scene(room(), spec, "procedural")
+    if spec == "conference-room":
+        tris, view = conference_room()
+        return Scene(tris, spec, "procedural", view=view)
     for kind, pat in PATTERNS.items():
         m = pat.match(spec)
         if m:
@@ -229,11 +232,13 @@ def in_stadium(pot: np.ndarray) -> tuple[np.ndarray, int, tuple]:
     return np.concatenate([pot, stadium]).astype(np.float32), len(pot), view
 
 
-def room(target: int = 280_000) -> np.ndarray:
-    """A conference-room stand-in: walls/floor/ceiling plus rows of tables with chairs, each part a
-    box whose faces are subdivided so the total is about ``target`` triangles."""
+#: the conference room's hall (m): width, depth, height; and the view its cameras frame from inside
+ROOM_W, ROOM_D, ROOM_H = 30.0, 20.0, 3.0
+
+
+def _furniture():
+    """Boxes (lo, hi) of 6 x 8 tables with four chairs each (legs, seats, backs)."""
     parts = []
-    W, D = 30.0, 20.0
     for i in range(6):
         for j in range(8):
             x0, y0 = 2.0 + i * 4.5, 1.5 + j * 2.3
@@ -250,6 +255,33 @@ def room(target: int = 280_000) -> np.ndarray:
                     for lx in (cx, cx + 0.45):
                         for ly in (cy, cy + 0.4):
                             parts.append(((lx, ly, 0.0), (lx + 0.05, ly + 0.05, 0.45)))  # chair legs
+    return parts
+
+
+def conference_room(target: int = 280_000):
+    """(triangles, view): the conference room's character for Ize Tables 2/4 and Wald Tables 1/3/4 —
+    a closed hall (floor, ceiling and four walls, thin boxes) with the tables and chairs of
+    :func:`room` inside, about ``target`` triangles, small detail in a large box. The ``view``
+    (centre, radius) puts the camera inside the hall under the ceiling, looking down across the
+    tables (:func:`tracer.scenes.rays.camera_frame`: eye = centre + 2.6 radius along the view
+    direction, here about 2.9 m above the floor)."""
+    W, D, H, t = ROOM_W, ROOM_D, ROOM_H, 0.1
+    parts = _furniture()
+    sub = max(1, int(round(np.sqrt(target / (12.0 * (len(parts) + 6 * 16))))))
+    shell = [((0, 0, -t), (W, D, 0)), ((0, 0, H), (W, D, H + t)),                # floor, ceiling
+             ((-t, 0, 0), (0, D, H)), ((W, 0, 0), (W + t, D, H)),                # walls x
+             ((0, -t, 0), (W, 0, H)), ((0, D, 0), (W, D + t, H))]                # walls y
+    tris = [box(lo, hi, sub=4 * sub) for lo, hi in shell] + [box(lo, hi, sub=sub) for lo, hi in parts]
+    view = (np.array([W / 2, D / 2, 1.0]), 1.0)
+    return np.concatenate(tris).astype(np.float32), view
+
+
+def room(target: int = 280_000) -> np.ndarray:
+    """Tables and chairs on a floor slab, no walls or ceiling, about ``target`` triangles: what
+    stood in for the conference room before :func:`conference_room` (viewed from outside, it has
+    none of the room's character: no large box around small detail)."""
+    parts = _furniture()
+    W, D = ROOM_W, ROOM_D
     sub = max(1, int(round(np.sqrt(target / (12.0 * (len(parts) + 1))))))
     # a floor slab but no walls or ceiling: rays from outside (random rays) must reach the furniture
     tris = [box((0, 0, -0.1), (W, D, 0.0), sub=4 * sub)]

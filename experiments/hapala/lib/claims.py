@@ -126,4 +126,4 @@ def claims_markdown(c: pd.DataFrame, tab: pd.DataFrame | None = None) -> str:
     return "\n".join(lines) + "\n"
 #: our scene -> the paper's scene it stands in for (same model or same procedural recipe)
 PAPER_MATCH = {"boxes-44": "boxes", "cornell": "cornell", "sphere-2880": "sphere", "teapot": "teapot",
-               "knot-56k": "knot", "bunny-69k": "bunny", "sphere-87k": "sphere-high", "room": "conference"}
+               "knot-56k": "knot", "bunny-69k": "bunny", "sphere-87k": "sphere-high", "conference-room": "conference"}

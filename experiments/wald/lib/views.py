@@ -32,7 +32,7 @@ def inside_view(scene, eye, look, radius):
 def wald_camera(scene, side: int, k: int) -> Rays:
     """Camera rays of a side x side image in k x k tile order: the room from inside (eye among the
     tables), every other scene from outside framing its bounding sphere (the project's default)."""
-    if scene.name == "room":
+    if scene.name in ("room", "conference-room"):  # the hall's inside view, as the paper's conf
         sc, eye_dir = inside_view(scene, ROOM_EYE, ROOM_LOOK, ROOM_VIEW_R)
         return camera_rays(sc, side, side, tile=k, eye_dir=eye_dir)
     return camera_rays(scene, side, side, tile=k)
@@ -41,7 +41,7 @@ def wald_camera(scene, side: int, k: int) -> Rays:
 def light_position(scene) -> np.ndarray:
     """The point light: above and to the side of the scene (the room: under where a ceiling would
     be, over the middle of the tables)."""
-    if scene.name == "room":
+    if scene.name in ("room", "conference-room"):
         return np.array([15.0, 10.0, 2.5])
     c, r = bounding_sphere(scene)
     return c + r * np.array([0.4, -0.3, 1.2])
