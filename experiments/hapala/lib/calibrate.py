@@ -15,7 +15,8 @@ from experiments.core.common import progress
 from experiments.hapala.lib.claims import STAND_INS
 KINDS = ("random", "path")
 PROCEDURAL = ["boxes-44", "cylinder-196", "particles-2000", "sphere-2880", "cylinder-3996", "teapot-in-stadium",
-              "boxes-2000", "cylinder-19996", "surfpoints-20k", "knot-56k", "sphere-87k", "particles-100k", "room"]
+              "boxes-2000", "cylinder-19996", "surfpoints-20k", "knot-56k", "sphere-87k", "particles-100k", "room",
+              "conference-room"]
 SPD = ["tetra-6", "sphereflake-2", "gears-3", "tree-8", "sphereflake-3"]
 QUICK = ["cornell", "boxes-44", "bunny-948", "suzanne", "cylinder-196", "particles-2000", "teapot",
          "teapot-in-stadium"]
