@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 import pandas as pd
 
-from experiments.fournier import around, scenes
+from experiments.fournier.lib import around, scenes
 from experiments.fournier.table1 import PAPER_TABLE1, TEAPOT, measure_scene, object_ids
 from tracer.accel.oracle import oracle_intersect
 from tracer.accel.sortedlists import SortedLists, padded_boxes
