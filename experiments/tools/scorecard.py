@@ -63,8 +63,13 @@ def judge(c: Cited, ours, lo=None, hi=None, cf=None, cf_how: str = "", stand_in:
             return "explained", (f"{cf_how} gives {cf:.3g} (paper {p:g} ±{tol:g}): the method's work matches; the gap "
                                  "is our cost per unit of work")
         back = 100 * (cf - ours) / (p - ours) if p != ours else float("nan")
-        left = f"; left: {p - cf:+.3g}" + (f" (stand-in: {stand_in})" if stand_in else "")
-        return "contradicted", f"{cf_how} gives {cf:.3g}: {back:.0f} % of the gap from ours {ours:.3g} to {p:g} comes back{left}"
+        note = f" (stand-in: {stand_in})" if stand_in else ""
+        if back > 100:  # the counted work alone overshoots the paper: the whole gap is cost per unit of work
+            return "contradicted", (f"{cf_how} gives {cf:.3g}, beyond the paper's {p:g}: the method's work accounts for "
+                                    f"all of the gap from ours {ours:.3g} ({back:.0f} %); our cost per unit of work "
+                                    f"takes it away, and the paper's own costs per unit took {cf - p:.3g} of it{note}")
+        return "contradicted", (f"{cf_how} gives {cf:.3g}: {back:.0f} % of the gap from ours {ours:.3g} to {p:g} comes "
+                                f"back; left: {p - cf:+.3g}{note}")
     if stand_in:
         return "explained", f"ours {ours:.3g} against {p:g} on a stand-in: {stand_in}"
     return "contradicted", f"ours {ours:.3g} against {p:g}, no counterfactual for this claim"
@@ -271,7 +276,8 @@ def hapala_rows(out: Path) -> list[dict]:
         dp, do = r["t_RG_us_random"] - r["t_RH_us_random"], float(s.t_RG_us_random - s.t_RH_us_random)
         why = (f"R_C = T_B^H / (t_R^G - t_R^H): our kd-tree build is {float(s.T_BH_ms) / r['T_BH_ms']:.2g}x the "
                f"paper's and our per-ray gap {do:.3g} us against {dp:.3g} us: the per-ray gap (the hierarchy's "
-               "advantage per ray) accounts for a factor " + (f"{dp / do:.2g}" if do > 0 else "inf"))
+               "advantage per ray) is " + (f"{dp / do:.2g}x smaller here" if do > 0 else "gone here") + ": our kd-tree is "
+               "barely faster per ray than our grid, an implementation ratio (see bench), not a property of the method")
         v = row(P, "Table 1", f"R_C for random rays on {s.scene} ({r['scene']})", c, ours, target="table1h")
         if v["verdict"] != "reproduced":
             v["explanation"] = f"{v['explanation']}; {why}"
