@@ -1,5 +1,5 @@
 """Sympy derivations of every grid cost model in Ize, Shirley & Parker 2007, "Grid Creation Strategies for
-Efficient Ray Tracing" (/work/shared/papers/ize-shirley-parker-2007-grid-creation-strategies.md).
+Efficient Ray Tracing" (``../shared/papers/ize-shirley-parker-2007-grid-creation-strategies.md`` beside the repository).
 
 One function per paper equation, named for it.  Every optimum, exponent and check is computed by sympy at call
 time; the only constants typed in are the paper's *stated* results (exponents, closed forms, Ti/Ts = 4 and the

@@ -1,7 +1,8 @@
 """The gridcost CLI: ``python -m experiments.run <target> [options]``.
 
 One table of targets (``TARGETS``) maps a name to the module that implements it.
-Every target module exposes ``add_arguments(parser)`` and ``main(args) -> int``.
+Every target module exposes ``add_arguments(parser)`` and ``main(ctx, args) -> int`` (``ctx``: the
+run's :class:`experiments.core.context.RunContext`).
 Bad input anywhere raises :class:`tracer.errors.GridcostError`; it is printed as one
 line on stderr and the process exits with status 2. Any other exception is an internal
 error: one line naming the target, exit status 1 (``--debug`` shows the traceback).

@@ -1,4 +1,4 @@
-"""Wald 2006 items of issue 17: packet any-hit (shadow) queries against the float64 oracle, the room
+"""Wald 2006: packet any-hit (shadow) queries against the float64 oracle, the room
 camera from inside, and the new targets run with --quick (small scenes, small images)."""
 from __future__ import annotations
 

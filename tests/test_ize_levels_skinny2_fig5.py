@@ -1,4 +1,4 @@
-"""Issue 17 targets (ize-levels, ize-skinny2, the extended fig5) in --quick mode on small scenes and few
+"""The ize-levels, ize-skinny2 and extended fig5 targets in --quick mode on small scenes and few
 rays, in-process into a temporary folder: the CSVs hold real values (theory cell counts equal to the
 paper's formulas, non-negative swept penalties, positive paired speed-ups, one plane per scene x kind)."""
 import json
