@@ -360,10 +360,12 @@ def wald_rows(out: Path) -> list[dict]:
                     float(b6.measured_best_lam.max()), target="wald-fig6"))
     cr = _csv(out, "wald-fig7/crossover.csv")
     c = wald2006.PACKET_CROSSOVER_N
-    if cr is None or cr.empty:
-        rows.append(missing(P, "Fig 7", "8x8 to 4x4 crossover", c, "wald-fig7", "no crossover measured"))
+    x = None if cr is None or cr.empty else cr.iloc[0]
+    if x is None or pd.isna(x["to"]) or pd.isna(x.N_to):
+        best = "" if x is None else f": {x['from']}x{x['from']} packets stay best over the resolutions measured"
+        rows.append(missing(P, "Fig 7", "8x8 to 4x4 packet-size crossover", c, "wald-fig7",
+                            f"no crossover measured{best}" if x is not None else ""))
     else:
-        x = cr.iloc[0]
         rows.append(row(P, "Fig 7", f"packet-size crossover ({x['from']} to {x['to']})", c,
                         float(np.sqrt(x.N_from * x.N_to)), float(x.N_from), float(x.N_to), target="wald-fig7",
                         stand_in="the Stanford bunny and dragon resolutions for the Armadillo's"))
