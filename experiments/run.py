@@ -193,15 +193,28 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.out is None:
         args.out = _default_out(args)
-    if args.models:
-        os.environ["GRIDCOST_MODELS"] = args.models
+    try:
+        from tracer import settings as settings_mod
+        settings = settings_mod.Settings.from_env()  # the one read of the environment
+        if args.models:
+            settings = settings.replace(models=args.models)
+        if getattr(args, "dask", None):  # see DaskExecutor: a Dask run times client and workers with wall time
+            settings = settings.replace(clock="wall")
+        with settings_mod.use(settings):
+            return _run(args, settings)
+    except Exception as exc:
+        return _failure(args.target, exc, args.debug)
+
+
+def _run(args, settings) -> int:
+    """The target (or all) of ``args`` inside the run's settings."""
     ctx = None
     try:
         if args.threads:
             from tracer.measure.timing import set_threads
             set_threads(args.threads)
         from experiments.core.context import RunContext
-        ctx = RunContext.from_args(args)
+        ctx = RunContext.from_args(args, settings)
         if args.target != "all":
             return _run_target(args.target, ctx, args)
         _refuse_dirty(ctx, args)

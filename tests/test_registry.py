@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tracer.settings import use
+
 from tracer.scenes import registry
 from tracer.errors import GridcostError
 from tracer.scenes.registry import MESHES, Source
@@ -39,9 +41,8 @@ def isolated(monkeypatch, tmp_path):
     monkeypatch.setenv("GRIDCOST_CACHE", str(dirs["cache"]))
     monkeypatch.setenv("GRIDCOST_OFFLINE", "1")
     monkeypatch.delenv("GRIDCOST_NO_STAND_INS", raising=False)
-    monkeypatch.setattr(registry, "_ANNOUNCED", set())
-    monkeypatch.setattr(registry, "_NETWORK_DOWN", [])
-    return dirs
+    with use(None):  # a fresh run log: no stand-in announced, the network not yet found down
+        yield dirs
 
 
 def vendored_file(name: str) -> Path:

@@ -19,9 +19,10 @@ def cache_root() -> Path:
     """The user cache: ``$GRIDCOST_CACHE``, else ``platformdirs.user_cache_dir("gridcost")`` (on Linux
     ``~/.cache/gridcost``). Parsed meshes, downloads, stand-ins, oracle answers, the machine probe
     and the compiled kernels live here."""
-    env = os.environ.get("GRIDCOST_CACHE")
+    from tracer.settings import current
+    env = current().cache
     if env:
-        return Path(env).expanduser()
+        return Path(env)
     try:
         import platformdirs
         return Path(platformdirs.user_cache_dir("gridcost", appauthor=False))

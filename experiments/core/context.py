@@ -14,12 +14,15 @@ import pandas as pd
 
 from experiments.core.figures import figure_dir, finish_figure
 from experiments.core.store import PROVENANCE_COLUMNS, Ledger, PointStore, atomic_write, git_commit, versions, write_json
+from tracer.settings import Settings
 
 
 @dataclass
 class RunContext:
     """Output directory, quick mode, threads, executor, the point store's settings, the figure
-    directory, the provenance ledger and the per-run caches of one run."""
+    directory, the provenance ledger, the per-run caches of one run, and its :class:`Settings`
+    (the environment's, unless the caller resolved others: ``run.main`` runs the target inside
+    ``tracer.settings.use(ctx.settings)``; a Dask task carries them to its worker)."""
     out: Path = Path("results")
     quick: bool = False
     threads: int | None = None
@@ -34,6 +37,7 @@ class RunContext:
     scenes: dict = field(default_factory=dict)
     #: this host's timing noise when the current target started (:mod:`experiments.core.noise`)
     noise_start: dict | None = None
+    settings: Settings = field(default_factory=Settings.from_env)
 
     def __post_init__(self):
         self.out = Path(self.out)
@@ -44,11 +48,12 @@ class RunContext:
             self.executor = LocalExecutor(self)
 
     @classmethod
-    def from_args(cls, args) -> "RunContext":
-        """The context of a command line (``run.main`` only)."""
+    def from_args(cls, args, settings: Settings) -> "RunContext":
+        """The context of a command line (``run.main`` only) with its resolved ``settings``."""
         executor = None
         ctx = cls(out=Path(args.out), quick=bool(getattr(args, "quick", False)), threads=args.threads,
-                  force=bool(getattr(args, "force", False)), reuse_stale=bool(getattr(args, "reuse_stale", False)))
+                  force=bool(getattr(args, "force", False)), reuse_stale=bool(getattr(args, "reuse_stale", False)),
+                  settings=settings)
         if getattr(args, "dask", None):
             from experiments.core.executor import DaskExecutor
             executor = DaskExecutor(args.dask, ctx, tls=getattr(args, "tls", None),
@@ -97,10 +102,11 @@ class RunContext:
             vals = self.ledger.column_values()
             for c in missing:
                 df[c] = vals[c]
-        from tracer.scenes.registry import STAND_INS
+        from tracer.settings import run_log
+        used = run_log().stand_ins
         if "scene" in df.columns and "stand_in" not in df.columns:
             df = df.copy()
-            df["stand_in"] = df.scene.map(lambda s: STAND_INS.get(s, "")).fillna("")
+            df["stand_in"] = df.scene.map(lambda s: used.get(s, "")).fillna("")
         return atomic_write(path, df.to_csv(index=False))
 
     def write_meta(self, out_dir, target: str, started: float, **extra) -> Path:
@@ -157,12 +163,13 @@ class RunContext:
 
     def mark_stand_ins(self, summary_path) -> None:
         """Append to a target's summary.md which of its scenes are stand-ins for meshes not found."""
-        from tracer.scenes.registry import STAND_INS
+        from tracer.settings import run_log
+        stand_ins = run_log().stand_ins
         path = Path(summary_path)
-        if not STAND_INS or not path.exists():
+        if not stand_ins or not path.exists():
             return
         text = path.read_text()
-        used = {k: v for k, v in STAND_INS.items() if k in text}
+        used = {k: v for k, v in stand_ins.items() if k in text}
         if not used or "## Stand-ins" in text:
             return
         atomic_write(path, text.rstrip("\n") + "\n\n## Stand-ins\n\n**These rows are not the real meshes:**\n\n"

@@ -2,16 +2,24 @@
 so timings never overlap) or Dask (``--dask ADDRESS``: tasks go to the workers of an existing
 dask.distributed cluster; every row records the worker that timed it).
 
-A task is a plain, picklable spec: scene name (looked up through the mesh registry on the worker,
-``models`` telling it where), structure, parameters, ray sets as (kind, n, seed), repeats, thread
-count and the measurement code. Workers rebuild the scene and the rays from it (both
+A task is a plain, picklable spec: scene name (looked up through the mesh registry on the worker),
+structure, parameters, ray sets as (kind, n, seed), repeats, thread count, the measurement code and
+the client's :class:`tracer.settings.Settings` (``settings``: where meshes are, the clock), under
+which the worker runs it. Workers rebuild the scene and the rays from it (both
 deterministic) and return their measurement key with the rows, so the client can refuse a point
 made by other code.
 """
 from __future__ import annotations
 
-import os
+import contextlib
 from typing import Iterable, Iterator
+
+from tracer.settings import Settings, current, use
+
+
+def _settings_of(d: dict | None):
+    """The block runs with the client's settings ``d`` (a worker), or with this process' own (local)."""
+    return use(Settings.on_worker(d)) if d else contextlib.nullcontext()
 
 
 def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
@@ -22,17 +30,14 @@ def run_point(spec: dict, scene=None, ref=None) -> tuple[dict, list[dict]]:
     from tracer.scenes.rays import make_rays
     from tracer.scenes.scene import load_scene
     from tracer.measure.timing import MIN_SAMPLE_SECONDS, set_threads
-    if spec.get("models"):
-        os.environ["GRIDCOST_MODELS"] = spec["models"]
-    if spec.get("clock_env"):
-        os.environ["GRIDCOST_CLOCK"] = spec["clock_env"]
-    if spec.get("threads"):
-        set_threads(spec["threads"])
-    scene = scene if scene is not None else load_scene(spec["scene"])
-    rays = {kind: make_rays(scene, kind, n, seed=seed) for kind, (n, seed) in spec["rays"].items()}
-    rows = measure(scene, spec["structure"], spec["params"], rays, spec["repeats"],
-                   spec.get("min_sample", MIN_SAMPLE_SECONDS), ref=ref)
-    key = measurement_key(tuple(spec.get("code", ())))
+    with _settings_of(spec.get("settings")):
+        if spec.get("threads"):
+            set_threads(spec["threads"])
+        scene = scene if scene is not None else load_scene(spec["scene"])
+        rays = {kind: make_rays(scene, kind, n, seed=seed) for kind, (n, seed) in spec["rays"].items()}
+        rows = measure(scene, spec["structure"], spec["params"], rays, spec["repeats"],
+                       spec.get("min_sample", MIN_SAMPLE_SECONDS), ref=ref)
+        key = measurement_key(tuple(spec.get("code", ())))
     return spec, [dict(r, key=key) for r in rows]
 
 
@@ -96,20 +101,17 @@ def _from_refs(args):
     return tuple(out)
 
 
-def remote_task(fn, args, threads, models, code, clock_env=None):
-    """Run ``fn(*args)`` on a worker with the client's thread count, models location and clock
-    setting; returns (result, the worker's measurement key, its host)."""
+def remote_task(fn, args, threads, settings: dict, code):
+    """Run ``fn(*args)`` on a worker with the client's thread count and settings; returns (result,
+    the worker's measurement key, its host)."""
     from tracer.measure.provenance import host
     from tracer.measure.timing import measurement_key
     from tracer.measure.timing import set_threads
-    if models:
-        os.environ["GRIDCOST_MODELS"] = models
-    if clock_env:
-        os.environ["GRIDCOST_CLOCK"] = clock_env
-    if threads:
-        set_threads(threads)
-    result = fn(*_from_refs(args))
-    return result, measurement_key(tuple(code)), host()
+    with _settings_of(settings):
+        if threads:
+            set_threads(threads)
+        result = fn(*_from_refs(args))
+        return result, measurement_key(tuple(code)), host()
 
 
 class LocalExecutor:
@@ -145,7 +147,8 @@ class DaskExecutor:
 
     A Dask worker runs tasks on a thread of its own pool, where a one-thread Numba ``prange`` kernel
     may run on another thread than the task's (the thread-clock check sees ~0 %); a run with Dask
-    therefore times everything, client and workers, with wall time (``GRIDCOST_CLOCK=wall``)."""
+    therefore times everything, client and workers, with wall time: ``run.main`` resolves its
+    settings with ``clock="wall"``, and the tasks carry the client's settings with that clock."""
 
     name = "dask"
 
@@ -160,7 +163,6 @@ class DaskExecutor:
             raise GridcostError("Dask is not installed: pip install 'gridcost[dask]'") from None
         from experiments.core import tls as tls_mod
         self.ctx = ctx
-        os.environ["GRIDCOST_CLOCK"] = "wall"
         sec = tls_mod.security(tls) if tls is not None else None
         if address == "local":
             kw = {"security": sec, "protocol": "tls://"} if sec is not None else {}
@@ -174,20 +176,24 @@ class DaskExecutor:
 
     def map(self, specs: Iterable[dict], scenes: dict | None = None) -> Iterator[tuple[dict, list[dict]]]:
         from dask.distributed import as_completed
-        extra = {"models": os.environ.get("GRIDCOST_MODELS"), "clock_env": os.environ.get("GRIDCOST_CLOCK")}
-        futures = [self.client.submit(run_point, dict(s, **extra), pure=False) for s in specs]
+        settings = self._settings()
+        futures = [self.client.submit(run_point, dict(s, settings=settings), pure=False) for s in specs]
         for fut in as_completed(futures):
             spec, rows = fut.result()
-            for k in extra:
-                spec.pop(k, None)
+            spec.pop("settings", None)
             yield spec, rows
+
+    @staticmethod
+    def _settings() -> dict:
+        """The client's settings for its tasks, with the wall clock a Dask run times with."""
+        return current().replace(clock="wall").for_worker()
 
     def run_task(self, fn, args: tuple, threads: int, code: tuple):
         """``fn(*args)`` as one task on one worker (e.g. a paired comparison: both sides in one
         process on one machine); scenes and ray sets travel by name. Returns (result, the worker's
         measurement key, its host)."""
-        return self.client.submit(remote_task, fn, _to_refs(args), threads, os.environ.get("GRIDCOST_MODELS"),
-                                  tuple(code), os.environ.get("GRIDCOST_CLOCK"), pure=False).result()
+        return self.client.submit(remote_task, fn, _to_refs(args), threads, self._settings(), tuple(code),
+                                  pure=False).result()
 
     def close(self) -> None:
         self.client.close()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+from tracer.settings import current
 from tracer.storage import atomic_write
 
 
@@ -43,7 +44,7 @@ def report(download: bool = False) -> dict:
                "found": True, "step": r.get("found"), "path": r.get("path"), "licence": r.get("license", "")}
               for n, r in manifest().items() if n not in registry.MESHES]
     return {"lookup": [{"step": s, "where": registry.STEP_HELP[s]} for s in registry.STEPS],
-            "env": {"GRIDCOST_MODELS": os.environ.get("GRIDCOST_MODELS"),
+            "env": {"GRIDCOST_MODELS": current().models,
                     "shared_models": str(registry.shared_models_dir() or "") or None,
                     "cache": str(registry.cache_root()),
                     "downloads": registry.downloads_allowed(),

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
+import sys
 import time
 from pathlib import Path
 
@@ -92,7 +92,8 @@ def stream_gbs(nbytes: int, repeats: int = 3) -> float:
 
 
 def machine_dir() -> Path:
-    env = os.environ.get("GRIDCOST_MACHINE_DIR")
+    from tracer.settings import current
+    env = current().machine_dir
     return Path(env) if env else Path.home() / ".cache" / "gridcost" / "machine"
 
 
@@ -136,8 +137,13 @@ class MachineModel:
         200k loads per size, stored apart from the full probe."""
         path = machine_file(quick)
         if path.is_file() and not refresh:
-            data = json.loads(path.read_text())
-            if data.get("version") == PROBE_VERSION and data.get("cpu") == cpu_model():
+            try:
+                data = json.loads(path.read_text())
+            except (OSError, ValueError) as exc:  # a cut or garbled probe file is probed again, not fatal
+                print(f"gridcost: the machine probe {path} is unreadable ({type(exc).__name__}); probing again",
+                      file=sys.stderr)
+                data = {}
+            if isinstance(data, dict) and data.get("version") == PROBE_VERSION and data.get("cpu") == cpu_model():
                 return cls(data)
         if log:
             log(f"machine model: probing load latency over 4 KiB .. {MAX_BYTES >> 20} MiB (once per host, ~20 s)")

@@ -5,6 +5,7 @@ import functools
 import os
 
 from tracer.errors import GridcostError
+from tracer.settings import current, parse_bytes as _parse_bytes
 
 #: default fraction of physical RAM one structure may allocate before the guard refuses (a setting
 #: of gridcost, not a paper constant)
@@ -18,36 +19,18 @@ def physical_ram() -> int:
         return 8 << 30
 
 
-def _parse_bytes(text: str) -> int:
-    text = text.strip().upper()
-    mult = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-    if text and text[-1] == "B":
-        text = text[:-1]
-    if text and text[-1] in mult:
-        return int(float(text[:-1]) * mult[text[-1]])
-    return int(float(text))
-
-
 def memory_budget() -> int:
     """Bytes one structure may allocate: $GRIDCOST_MEMORY_BUDGET (e.g. '2G') or half the RAM."""
-    env = os.environ.get("GRIDCOST_MEMORY_BUDGET")
-    if env:
-        try:
-            return _parse_bytes(env)
-        except ValueError:
-            raise GridcostError(f"GRIDCOST_MEMORY_BUDGET={env!r} is not a byte count (e.g. 2G)") from None
-    return int(physical_ram() * MEMORY_BUDGET_FRACTION)
+    budget = current().memory_budget
+    return budget if budget is not None else int(physical_ram() * MEMORY_BUDGET_FRACTION)
 
 
 def cache_bytes(level: int = 2) -> int:
     """Size of cpu0's level-``level`` data/unified cache from sysfs ($GRIDCOST_L2 / $GRIDCOST_L3
     override, e.g. '1M'); 32 KiB (L1), 1 MiB (L2) or 32 MiB (L3) when unknown."""
-    env = os.environ.get(f"GRIDCOST_L{level}")
-    if env:
-        try:
-            return _parse_bytes(env)
-        except ValueError:
-            raise GridcostError(f"GRIDCOST_L{level}={env!r} is not a byte count (e.g. 1M)") from None
+    sizes = current().cache_sizes
+    if 1 <= level <= len(sizes) and sizes[level - 1] is not None:
+        return sizes[level - 1]
     return _sysfs_cache_bytes(level)
 
 

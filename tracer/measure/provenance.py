@@ -21,7 +21,6 @@ from __future__ import annotations
 import ast
 import functools
 import hashlib
-import os
 import platform
 import socket
 from importlib import metadata
@@ -143,11 +142,12 @@ def kernel_digest() -> str:
 def numba_cache_dir() -> Path:
     """Where compiled kernels are cached: ``<base>/numba/<kernel digest[:16]>``, base being
     ``$GRIDCOST_NUMBA_CACHE`` or ``$GRIDCOST_CACHE`` or ``~/.cache/gridcost``."""
-    base = os.environ.get("GRIDCOST_NUMBA_CACHE")
-    if base:
-        root = Path(base).expanduser()
+    from tracer.settings import current
+    s = current()
+    if s.numba_cache:
+        root = Path(s.numba_cache)
     else:
-        root = Path(os.environ.get("GRIDCOST_CACHE", Path.home() / ".cache" / "gridcost")).expanduser() / "numba"
+        root = Path(s.cache or Path.home() / ".cache" / "gridcost") / "numba"
     return root / kernel_digest()[:16]
 
 

@@ -75,7 +75,9 @@ def _probe_kernel(x, reps):
     return acc
 
 
-_WARNED = []
+def _pin_setting() -> bool:
+    from tracer.settings import current
+    return current().pin
 
 
 def default_clock() -> Callable[[], float]:
@@ -84,12 +86,14 @@ def default_clock() -> Callable[[], float]:
     provided :func:`thread_clock_check` finds it does see a kernel's work; otherwise, and with more
     threads, wall time (``time.perf_counter``). ``GRIDCOST_CLOCK=wall`` forces wall time."""
     import numba
-    if os.environ.get("GRIDCOST_CLOCK", "") == "wall" or numba.get_num_threads() != 1:
+    from tracer.settings import current, run_log
+    if current().clock == "wall" or numba.get_num_threads() != 1:
         return time.perf_counter
     chk = thread_clock_check()
     if not chk["ok"]:
-        if not _WARNED:
-            _WARNED.append(1)
+        log = run_log()
+        if not log.clock_warned:
+            log.clock_warned = True
             print(f"gridcost: the thread CPU clock read {chk['ratio']:.1%} of wall time on a one-thread kernel "
                   f"(work runs on another thread?); timing with wall time instead", file=sys.stderr)
         return time.perf_counter
@@ -105,13 +109,16 @@ def clock_name() -> str:
 build_clock = time.perf_counter
 
 
-_CALLS = [0]
-
-
 def timing_calls() -> int:
-    """How many :func:`time_call` timings this process has taken (lets the result writer tell a
+    """How many :func:`time_call` timings this run has taken (lets the result writer tell a
     file measured now from one drawn from stored points)."""
-    return _CALLS[0]
+    from tracer.settings import run_log
+    return run_log().timings
+
+
+def _count_timing() -> None:
+    from tracer.settings import run_log
+    run_log().timings += 1
 
 
 def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
@@ -119,7 +126,7 @@ def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
     """Call ``fn`` ``warmup`` times untimed (JIT compilation, caches), then take ``repeats`` samples;
     a sample runs ``fn`` back to back until it lasts ``min_sample`` seconds and is reported per call.
     ``clock`` defaults to :func:`default_clock`."""
-    _CALLS[0] += 1
+    _count_timing()
     runs = sample_calls(fn, repeats, warmup, min_sample, clock)
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
@@ -153,7 +160,7 @@ def time_single_pass(trace: Callable, o: np.ndarray, d: np.ndarray, chunks: int 
     then each of ``chunks`` parts of the rest once, minus the per-call overhead (the median time of a
     1-ray call, floored at a quarter of the part's time). One value per part."""
     clock = clock or default_clock()
-    _CALLS[0] += 1
+    _count_timing()
     o1, d1 = o[:1].copy(), d[:1].copy()
     trace(o1, d1)
     ov = []
@@ -221,7 +228,7 @@ def set_threads(n: int | None) -> int:
     total = numba.config.NUMBA_NUM_THREADS
     n = total if n is None else max(1, min(int(n), total))
     numba.set_num_threads(n)
-    if hasattr(os, "sched_setaffinity") and os.environ.get("GRIDCOST_PIN") == "1":
+    if hasattr(os, "sched_setaffinity") and _pin_setting():
         try:
             all_cpus = set(range(os.cpu_count() or 1))
             os.sched_setaffinity(0, set(avail[:n]) if n < total else all_cpus)

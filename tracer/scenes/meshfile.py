@@ -11,6 +11,7 @@ Which file a *named* mesh is read from is :mod:`tracer.scenes.registry`'s busine
 from __future__ import annotations
 
 import gzip
+import functools
 import hashlib
 import io
 import logging
@@ -27,20 +28,20 @@ FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
 CACHE_VERSION = 3
 
 
-_FILE_HASHES: dict = {}
-
-
 def _sha256(path: Path) -> str:
     """sha256 of the file's bytes (as stored), memoized per path, size and mtime."""
     st = path.stat()
-    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
-    if key not in _FILE_HASHES:
-        h = hashlib.sha256()
-        with open(path, "rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
-        _FILE_HASHES[key] = h.hexdigest()
-    return _FILE_HASHES[key]
+    return _sha256_of(str(path.resolve()), st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=256)
+def _sha256_of(path: str, size: int, mtime_ns: int) -> str:
+    """(size and mtime are the cache key: a changed file is hashed again)"""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def _formats(path: Path) -> tuple[str, str | None]:

@@ -27,6 +27,7 @@ subdivided) and says so on stderr, unless ``GRIDCOST_NO_STAND_INS=1``, which mak
 """
 from __future__ import annotations
 
+import functools
 import gzip
 import hashlib
 import os
@@ -41,6 +42,7 @@ import numpy as np
 
 from tracer.errors import GridcostError
 from tracer.scenes.meshfile import load_mesh
+from tracer.settings import current, run_log
 from tracer.storage import atomic_savez, cache_root
 from tracer.scenes.procedural import sphere
 from tracer.scenes.registry_data import (  # the table, re-exported (tracer.scenes.registry.MESHES etc.)
@@ -80,22 +82,18 @@ def get(name: str) -> Mesh:
 
 
 # ---------------------------------------------------------------- places
-def _flag(var: str) -> bool:
-    return os.environ.get(var, "").strip().lower() not in ("", "0", "false", "no", "off")
-
-
 def env_models_dir() -> Path | None:
-    """``--models DIR`` (the CLI sets ``$GRIDCOST_MODELS``) or ``$GRIDCOST_MODELS``; None when unset."""
-    env = os.environ.get("GRIDCOST_MODELS")
-    return Path(env).expanduser() if env else None
+    """``--models DIR`` or ``$GRIDCOST_MODELS`` (:attr:`tracer.settings.Settings.models`); None when unset."""
+    env = current().models
+    return Path(env) if env else None
 
 
 def shared_models_dir() -> Path | None:
     """``../shared/models`` beside the repository (:data:`SHARED_MODELS`), or ``$GRIDCOST_SHARED_MODELS``;
     None when that variable is set but empty (the step is off)."""
-    env = os.environ.get("GRIDCOST_SHARED_MODELS")
+    env = current().shared_models_dir
     if env is not None:
-        return Path(env).expanduser() if env else None
+        return Path(env) if env else None
     return Path(SHARED_MODELS).resolve()
 
 
@@ -104,11 +102,11 @@ def mesh_cache_dir() -> Path:
 
 
 def downloads_allowed() -> bool:
-    return not _flag("GRIDCOST_OFFLINE")
+    return not current().offline
 
 
 def stand_ins_allowed() -> bool:
-    return not _flag("GRIDCOST_NO_STAND_INS")
+    return current().stand_ins
 
 
 def _variants(directory: Path, rel: str, flat: bool = True) -> list[Path]:
@@ -145,9 +143,6 @@ def candidates(name: str) -> list[tuple[str, Path]]:
 
 
 # ---------------------------------------------------------------- hashing, verification
-_HASHES: dict = {}
-
-
 def _open(path: Path):
     suffix = path.suffix.lower()
     if suffix == ".gz":
@@ -162,17 +157,20 @@ def content_sha256(path) -> str:
     """sha256 of a file's content (of the decompressed bytes for .gz/.xz); memoized per size and mtime."""
     path = Path(path)
     st = path.stat()
-    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
-    if key not in _HASHES:
-        h = hashlib.sha256()
-        try:
-            with _open(path) as f:
-                for block in iter(lambda: f.read(1 << 20), b""):
-                    h.update(block)
-        except (OSError, EOFError, ImportError) as exc:  # a broken .gz/.xz
-            raise GridcostError(f"{path}: cannot read ({exc})") from None
-        _HASHES[key] = h.hexdigest()
-    return _HASHES[key]
+    return _content_sha256(str(path.resolve()), st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=256)
+def _content_sha256(path: str, size: int, mtime_ns: int) -> str:
+    """(size and mtime are the cache key: a changed file is hashed again)"""
+    h = hashlib.sha256()
+    try:
+        with _open(Path(path)) as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except (OSError, EOFError, ImportError) as exc:  # a broken .gz/.xz
+        raise GridcostError(f"{path}: cannot read ({exc})") from None
+    return h.hexdigest()
 
 
 def verify(name: str, path) -> None:
@@ -244,9 +242,6 @@ class DownloadError(Exception):
     """Every source of a mesh failed (the message lists why)."""
 
 
-_NETWORK_DOWN: list = []  # the first connection error of this process (then the network is not tried again)
-
-
 def _file_downloader(url, output_file, pooch_obj=None, check_only=False):
     """pooch downloader for ``file://`` URLs (tests, local mirrors)."""
     src = Path(unquote(urlsplit(url).path))
@@ -306,10 +301,11 @@ def fetch(name: str) -> Path:
     dest = mesh_cache_dir() / mesh.file
     work = cache_root() / "downloads"
     errors = []
+    down = run_log().network_down  # the first connection error of this run: the network is not tried again
     for source in mesh.sources:
         remote = urlsplit(source.url).scheme not in ("file", "")
-        if remote and _NETWORK_DOWN:
-            errors.append(f"{source.url}: not tried, the network failed before ({_NETWORK_DOWN[0]})")
+        if remote and down:
+            errors.append(f"{source.url}: not tried, the network failed before ({down[0]})")
             continue
         try:
             work.mkdir(parents=True, exist_ok=True)
@@ -326,7 +322,7 @@ def fetch(name: str) -> Path:
         except Exception as exc:  # noqa: BLE001 - each source may fail in its own way; the next one is tried
             msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             if remote and _is_connection_error(exc):
-                _NETWORK_DOWN.append(type(exc).__name__)
+                down.append(type(exc).__name__)
                 msg = f"no connection ({type(exc).__name__})"
             errors.append(f"{source.url}: {msg[:200]}")
     raise DownloadError("; ".join(errors) or "no download source")
@@ -382,14 +378,11 @@ def _stand_in_base(mesh: Mesh):
     return best or (None, None)
 
 
-_ANNOUNCED: set = set()
-
-
 def stand_in(name: str, reason: str | None = None):
     """A deterministic, labelled stand-in :class:`~tracer.scenes.scenetype.Scene` for mesh ``name`` (about its number
     of faces): a smaller real mesh of the same object (:attr:`Mesh.stand_in_from`) subdivided to the face
     count (:func:`subdivide_to`), or a procedural sphere. ``scene.report["stand_in_for"]`` is ``name``,
-    ``scene.source`` starts with ``"stand-in:"``; one line on stderr says so (once per process)."""
+    ``scene.source`` starts with ``"stand-in:"``; one line on stderr says so (once per run)."""
     mesh = get(name)
     base, path = _stand_in_base(mesh)
     key = f"{STAND_IN_VERSION}|{name}|{mesh.faces}|{base.sha256 if base else 'sphere'}"
@@ -412,11 +405,12 @@ def stand_in(name: str, reason: str | None = None):
               "lookup": "stand-in"}
     report.update(validate(tris, f"stand-in for {name}"))
     scene = Scene(tris, name, f"stand-in: {recipe} (for {name}, {mesh.faces:,} faces, not found)", report)
-    STAND_INS[name] = stand_in_note(scene)
-    if name not in _ANNOUNCED:
-        _ANNOUNCED.add(name)
-        if _NETWORK_DOWN:
-            reason = f"no connection for the download ({_NETWORK_DOWN[0]})"
+    log = run_log()
+    log.stand_ins[name] = stand_in_note(scene)
+    if name not in log.announced:
+        log.announced.add(name)
+        if log.network_down:
+            reason = f"no connection for the download ({log.network_down[0]})"
         why = f" ({reason if len(reason) <= 100 else reason[:100] + '…'})" if reason else ""
         print(f"gridcost: {name} ({mesh.file}, {mesh.faces:,} faces) not found{why}; STAND-IN: {recipe}. "
               f"For the real mesh: {how_to_get(mesh)} (`python -m experiments.run models` lists every mesh); "
@@ -429,10 +423,6 @@ def how_to_get(mesh: Mesh) -> str:
     src = mesh.sources[0] if mesh.sources else Source(mesh.urls[0] if mesh.urls else "")
     what = f"extract {src.member} from {src.url}" if src.member else f"download {src.url}"
     return f"{what} into $GRIDCOST_MODELS/{Path(mesh.file).parent.as_posix()}/ (a .gz or .xz of it works too)"
-
-
-#: scene name -> note of every stand-in built or loaded in this process (experiment outputs mark them)
-STAND_INS: dict[str, str] = {}
 
 
 def stand_in_note(scene) -> str | None:

@@ -15,15 +15,10 @@ import pandas as pd
 
 from costmodel.memory import MemoryCostFit, SceneCalibratedFit, calibration_rows, model_optimum
 
-_MACHINE = {}
-
-
 def machine(quick: bool = False, log=None):
-    """The host's machine model, loaded (or probed) once per process."""
+    """The host's machine model, read from the probe's file (probed the first time on a host)."""
     from tracer.measure.machine import MachineModel
-    if quick not in _MACHINE:
-        _MACHINE[quick] = MachineModel.load(quick=quick, log=log)
-    return _MACHINE[quick]
+    return MachineModel.load(quick=quick, log=log)
 
 
 def memory_aware_table(df: pd.DataFrame, scenes, kinds, quick: bool = False, log=None, calibrate: bool = False) -> dict:
