@@ -29,6 +29,23 @@ def _design_one_level(M, N, form, setup=True):
     return np.column_stack(cols)
 
 
+def leave_one_out(names):
+    """``(name, the other names)`` for each of ``names`` (in order, duplicates once)."""
+    names = list(dict.fromkeys(names))
+    for name in names:
+        yield name, [n for n in names if n != name]
+
+
+def leave_one_scene_out(df, column: str = "scene", scenes=None):
+    """The one leave-one-scene-out split of gridcost (predict, the selector's errors, the packet
+    model's scores): ``(scene, train, test)`` for each scene of ``df[column]`` (in order of first
+    appearance, or those of ``scenes``): ``test`` is that scene's rows, ``train`` every other scene's
+    (empty when ``df`` holds one scene only)."""
+    for name, _ in leave_one_out(df[column] if scenes is None else scenes):
+        held = df[column] == name
+        yield name, df[~held], df[held]
+
+
 def _metrics(y, yhat) -> dict:
     """R², mean and maximum absolute percentage error of ``yhat`` against ``y`` (shared by every fit)."""
     y, yhat = np.asarray(y, float), np.asarray(yhat, float)

@@ -5,10 +5,9 @@ calibrating the structure it predicts").
 * :func:`kd_time_per_ray` — the model, T/ray = c_node nodes + c_leaf leaves + c_test tests + c_0.
 * :class:`KdCostFit` — non-negative least squares of that model (scikit-learn style), with
   ``ti_over_tt_`` = c_test / c_node, the SAH's C_isect / C_trav.
-* :func:`measure_kd_points` — per (scene, ray kind, build setting): mean counters per ray and the
-  median time per ray of the non-counting kernel (warm-up first, ``repeats`` timed runs).
-* :func:`fit_sah_constants` — both together: the fitted estimator for ``build(scene, "kdtree",
-  constants=fit)``.
+* :func:`fit_sah_constants` — the fitted estimator for ``build(scene, "kdtree", constants=fit)``
+  from measured points: per (scene, ray kind, build setting), mean counters per ray and the median
+  time per ray (:func:`experiments.core.probes.measure_kd_points` measures them; nothing here times).
 * :class:`BvhSahFit` / :func:`fit_bvh_trav_cost` — the same for the BVH's SAH: the binary BVH's time
   per ray fitted to its counters per ray kind, ``trav_cost_`` = C_trav / C_isect for
   ``build(scene, "bvh" | "bvh4", trav_cost=fit.trav_cost_)`` (pbrt-v2's setting is 1/8).
@@ -19,7 +18,6 @@ import numpy as np
 from scipy.optimize import nnls
 
 from costmodel.fit import _metrics
-from tracer.measure.timing import MIN_SAMPLE_SECONDS
 
 #: build settings measured by default: trees of different shapes (depth, clipping) so the node,
 #: leaf and test counts vary independently enough to separate their costs
@@ -72,40 +70,11 @@ class KdCostFit:
                 "ti_over_tt": self.ti_over_tt_, "cond": self.cond_, "points": self.n_points_, **self.metrics_}
 
 
-def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTINGS, n_rays: int = 50_000,
-                      repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree",
-                      min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
-    """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
-    per-ray means of the counters and the median seconds per ray of the non-counting kernel
-    (:func:`tracer.measure.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` as
-    :func:`tracer.measure.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
-    ``scenes`` are Scene objects or registry names. Run it single-threaded."""
-    from tracer.accel import build
-    from tracer.scenes.rays import make_rays
-    from tracer.scenes.scene import load_scene
-    from tracer.measure.timing import time_call
-    out = []
-    for sc in scenes:
-        scene = load_scene(sc) if isinstance(sc, str) else sc
-        rays = {k: make_rays(scene, k, n_rays, seed=seed) for k in kinds}
-        for params in settings:
-            kd = build(scene, structure, **params)
-            for kind, r in rays.items():
-                _, cnt = kd.intersect(r.origins, r.directions, counters=True)
-                tm = time_call(lambda: kd.intersect(r.origins, r.directions, counters=False), repeats=repeats,
-                               clock=clock, min_sample=min_sample)
-                m = cnt.mean()
-                out.append({"scene": scene.name, "kind": kind, "params": dict(params), "rays": r.n,
-                            "nodes": m["nodes"], "leaves": m["steps"], "tests": m["tests"],
-                            "s_per_ray": tm.median / r.n, "spread": tm.spread})
-    return out
-
-
-def fit_sah_constants(scenes=("bunny-16k", "dragon-48k", "bunny-69k"), points=None, **measure) -> KdCostFit:
-    """Measure (or take ``points`` from :func:`measure_kd_points`) and fit :class:`KdCostFit`; the
-    estimator's ``ti_over_tt_`` is the isect:trav constant for ``build(scene, "kdtree", constants=...)``.
-    The measured points are kept in ``points_``."""
-    pts = points if points is not None else measure_kd_points(scenes, **measure)
+def fit_sah_constants(points) -> KdCostFit:
+    """Fit :class:`KdCostFit` to measured ``points`` (:func:`experiments.core.probes.measure_kd_points`);
+    the estimator's ``ti_over_tt_`` is the isect:trav constant for ``build(scene, "kdtree",
+    constants=...)``. The points are kept in ``points_``."""
+    pts = list(points)
     X = np.array([[p[c] for c in COLUMNS] for p in pts])
     y = np.array([p["s_per_ray"] for p in pts]) * 1e9  # ns per ray
     fit = KdCostFit().fit(X, y)
@@ -186,10 +155,9 @@ class BvhSahFit:
                                    ("mape", self.mape_))}}
 
 
-def fit_bvh_trav_cost(scenes=BVH_CALIBRATION, points=None, settings=BVH_SETTINGS, strict: bool = False,
-                      **measure) -> BvhSahFit:
-    """Measure the binary BVH at ``settings`` on ``scenes`` (or take ``points`` from
-    :func:`measure_kd_points` with ``structure="bvh"``) and fit :class:`BvhSahFit` (``strict``: raise
-    rather than fall back to the default weight when no ray kind fits)."""
-    pts = points if points is not None else measure_kd_points(scenes, settings=settings, structure="bvh", **measure)
-    return BvhSahFit(strict=strict).fit(pts)
+def fit_bvh_trav_cost(points, strict: bool = False) -> BvhSahFit:
+    """Fit :class:`BvhSahFit` to the binary BVH's measured ``points``
+    (:func:`experiments.core.probes.measure_kd_points` with ``structure="bvh"`` and
+    :data:`BVH_SETTINGS` on :data:`BVH_CALIBRATION`); ``strict``: raise rather than fall back to the
+    default weight when no ray kind fits."""
+    return BvhSahFit(strict=strict).fit(list(points))

@@ -9,12 +9,12 @@ scikit-learn conventions: parameters in ``__init__``, ``fit`` returns self, fitt
 Calibration records are a :class:`pandas.DataFrame` with one row per (scene, ray kind) and the
 columns ``scene``, ``kind``, ``N``, ``T_BG``, ``t_RG`` (all rays), ``t_RG_sample`` (the
 sampled rays, what the decision algorithm sees), ``T_BH``, ``t_RH``, the grid's sampled counters and
-Havran statistics (:mod:`costmodel.havran`). ``experiments.hapala.table1.calibrate_scene`` measures them (calibration steps
-1-4, with :func:`probe_grid` for the decision's sample); :func:`records` flattens its output.
+Havran statistics (:mod:`costmodel.havran`). ``experiments.hapala.lib.calibrate.calibrate_scene`` measures them
+(calibration steps 1-4, with :func:`experiments.core.probes.probe_grid` for the decision's sample);
+:func:`records` flattens its output. Nothing here builds or times: :mod:`experiments.core.probes` does.
 """
 from __future__ import annotations
 
-from contextlib import contextmanager
 
 import numpy as np
 import pandas as pd
@@ -64,46 +64,6 @@ def time_stats(runs) -> dict:
     """Median and minimum of repeated timings (interference only ever adds time: the minimum is the
     less noisy estimate on a shared machine, the median the conventional one)."""
     return {"median": float(np.median(runs)), "min": float(np.min(runs))}
-
-
-@contextmanager
-def single_thread():
-    """Run the Numba kernels on the calling thread only: the times here are then the calling thread's
-    CPU time (:func:`tracer.measure.timing.default_clock`, when its check trusts it), which a shared machine
-    does not inflate the way it does wall time."""
-    import numba
-    n = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(n)
-
-
-def single_pass_time(accel, o, d, chunks: int = 1, warm: int = 0) -> dict:
-    """Per-ray time {median, min over parts} of tracing ``o, d`` once with ``accel``
-    (:func:`tracer.measure.timing.time_single_pass`: the way an application traces its first rays)."""
-    from tracer.measure.timing import time_single_pass
-    return time_stats(time_single_pass(lambda po, pd_: accel.intersect(po, pd_, counters=False), o, d, chunks, warm))
-
-
-def probe_grid(grid, rays, sample: int = DEFAULT_SAMPLE, seed: int = 0, idx: np.ndarray | None = None) -> dict:
-    """Decision step 2: the grid's time per ray on ``sample`` of ``rays`` (a random subset, or
-    ``idx``), each ray traced once (:func:`single_pass_time`: the first 10 % warm the caches, the
-    rest is timed in parts of >= 180 rays, at most 5), and what the grid's counters say about them:
-    fraction of rays meeting the scene box (``box_frac``), hit fraction, mean cells stepped and
-    triangles tested."""
-    if idx is None:
-        idx = np.random.default_rng(seed).permutation(rays.n)[:sample]
-    o = np.ascontiguousarray(rays.origins[idx])
-    d = np.ascontiguousarray(rays.directions[idx])
-    with single_thread():
-        t = single_pass_time(grid, o, d, chunks=min(5, max(1, len(idx) // 200)), warm=len(idx) // 10)
-    hits, cnt = grid.intersect(o, d, counters=True)
-    m = cnt.mean()
-    return {"t": t[TIME_STAT], "t_median": t["median"], "t_min": t["min"], "box_frac": m["setups"],
-            "hit_frac": float((hits.tri_id >= 0).mean()), "steps": m["steps"], "tests": m["tests"],
-            "rays": int(len(idx))}
 
 
 def _pick(v, stat):
@@ -449,35 +409,6 @@ class Selector:
                 "t_hier": float(t_RH), "t_build_hier": float(T_BH), "t_build_grid": float(features.get("T_BG", np.nan)),
                 "step": step, "n_rays": n_rays, "N": int(features["N"]), "estimator": getattr(self.estimator_, "form_", "")}
 
-    def probe(self, scene, rays=None) -> tuple[object, dict]:
-        """Steps 1-2: build the grid (timed) and sample its per-ray time; returns (grid, features)."""
-        from tracer.accel import build
-        from tracer.scenes.rays import make_rays
-        from tracer.scenes.scene import Scene
-        build(Scene(scene.tris[:1], "warm-up"), "grid")  # load the compiled kernels outside the timing
-        from tracer.measure.timing import build_clock
-        with single_thread():
-            t0 = build_clock()  # builds on wall time (see tracer.measure.timing.build_clock)
-            grid = build(scene, "grid", factor=self.grid_factor)
-            t_build = build_clock() - t0
-        if rays is None:
-            rays = make_rays(scene, self.kind, self.sample_rays, seed=self.seed)
-        p = probe_grid(grid, rays, sample=min(self.sample_rays, rays.n), seed=self.seed)
-        st = grid.stats()
-        feats = {"N": scene.n, "T_BG": t_build, "t_RG_sample": p["t"], "box_frac": p["box_frac"],
-                 "hit_frac": p["hit_frac"], "steps": p["steps"], "tests": p["tests"],
-                 "refs_per_tri": st["refs_per_tri"], **havran_stats(grid)}
-        return grid, feats
-
-    def decide(self, scene, n_rays: float, rays=None) -> dict:
-        """The 8 steps for ``scene`` and ``n_rays`` rays: a dict with ``choice`` ("grid" or the
-        hierarchy), ``rc_est``, ``t_grid`` (sampled t_R^G), ``t_hier`` (estimated t_R^H),
-        ``t_build_hier`` (estimated T_B^H), ``t_build_grid`` (measured T_B^G), all in seconds."""
-        _, feats = self.probe(scene, rays)
-        out = self.decide_features(feats, n_rays)
-        out["scene"] = scene.name
-        return out
-
 
 # ============================================================ evaluation (Sec 4)
 #: ray budgets of the decision-quality evaluation: 10^3 ... 10^9, 4 per decade
@@ -552,19 +483,21 @@ def evaluate(cal: pd.DataFrame, make_estimator, C_values=None, n_splits: int = 2
 
 def loo_errors(cal: pd.DataFrame, make_estimator, eps: float = HAPALA_EPS) -> pd.DataFrame:
     """Leave-one-scene-out (C = S - 1): each scene's R_est from an estimator fitted on all others."""
-    cal = cal.reset_index(drop=True)
+    from costmodel.fit import leave_one_scene_out
     out = []
-    for i in range(len(cal)):
-        est = make_estimator().fit(cal.drop(index=i))
-        row = cal.iloc[[i]]
-        T, t = est.predict(row["N"].to_numpy(float), row)
-        r = exact_rc(T, grid_time(est, row), t, eps)
-        out.append({"scene": row["scene"].iloc[0], "N": int(row["N"].iloc[0]), "R_C": float(row["R_C"].iloc[0]),
-                    "R_est": float(np.asarray(r).ravel()[0]), "T_BH": float(row["T_BH"].iloc[0]),
-                    "T_BH_est": float(np.ravel(T)[0]), "t_RH": float(row["t_RH"].iloc[0]), "t_RH_est": float(np.ravel(t)[0]),
-                    "t_RG": float(row["t_RG"].iloc[0]), "t_RG_sample": float(row["t_RG_sample"].iloc[0]),
-                    "t_RG_est": float(np.ravel(grid_time(est, row))[0]),
-                    "form": getattr(est, "form_", "")})
+    for _, train, held in leave_one_scene_out(cal.reset_index(drop=True)):
+        est = make_estimator().fit(train)
+        for j in range(len(held)):  # one row per scene for one ray kind; each row of the scene alike
+            row = held.iloc[[j]]
+            T, t = est.predict(row["N"].to_numpy(float), row)
+            g = grid_time(est, row)
+            r = exact_rc(T, g, t, eps)
+            out.append({"scene": row["scene"].iloc[0], "N": int(row["N"].iloc[0]), "R_C": float(row["R_C"].iloc[0]),
+                        "R_est": float(np.asarray(r).ravel()[0]), "T_BH": float(row["T_BH"].iloc[0]),
+                        "T_BH_est": float(np.ravel(T)[0]), "t_RH": float(row["t_RH"].iloc[0]),
+                        "t_RH_est": float(np.ravel(t)[0]), "t_RG": float(row["t_RG"].iloc[0]),
+                        "t_RG_sample": float(row["t_RG_sample"].iloc[0]), "t_RG_est": float(np.ravel(g)[0]),
+                        "form": getattr(est, "form_", "")})
     df = pd.DataFrame(out)
     df["err"] = rc_error(df["R_est"], df["R_C"])
     return df

@@ -112,7 +112,7 @@ def test_cost_fit_recovers_known_constants():
     assert fit.c_leaf_ == pytest.approx(3.0, rel=1e-6) and fit.c_0_ == pytest.approx(15.0, rel=1e-6)
     assert fit.metrics_["r2"] == pytest.approx(1.0)
     pts = [{"nodes": a, "leaves": b, "tests": c, "s_per_ray": t * 1e-9} for (a, b, c), t in zip(X, y)]
-    f2 = fit_sah_constants(points=pts)
+    f2 = fit_sah_constants(pts)
     assert f2.ti_over_tt_ == pytest.approx(5.0, rel=1e-6)
     kd = build(scene("cornell"), "kdtree", constants=f2, clip=True)
     assert kd.stats()["params"]["isect_cost"] == pytest.approx(5.0) and kd.stats()["params"]["trav_cost"] == 1.0
@@ -128,7 +128,7 @@ def test_bvh_sah_fit_recovers_the_weight_per_kind():
             nodes, tests = rng.uniform(10, 60), rng.uniform(1, 10)
             pts.append({"scene": "s", "kind": kind, "nodes": nodes, "leaves": 1.0, "tests": tests,
                         "s_per_ray": (cn * nodes + ct * tests) * 1e-9})
-    fit = fit_bvh_trav_cost(points=pts)
+    fit = fit_bvh_trav_cost(pts)
     assert fit.ratios_["random"] == pytest.approx(2.0, rel=1e-6) and fit.ratios_["camera"] == pytest.approx(0.5, rel=1e-6)
     assert fit.trav_cost_ == pytest.approx(1.0, rel=1e-6) and fit.mape_["random"] == pytest.approx(0.0, abs=1e-6)
     assert fit.summary()["camera_c_test_ns"] == pytest.approx(12.0, rel=1e-6)
@@ -144,7 +144,7 @@ def test_bvh_sah_fit_refuses_a_free_test():
     with pytest.raises(GridcostError, match="came out free for every ray kind"):
         BvhSahFit(strict=True).fit(free)
     with pytest.raises(GridcostError, match="came out free for every ray kind"):
-        fit_bvh_trav_cost(points=free, strict=True)
+        fit_bvh_trav_cost(free, strict=True)
     fb = BvhSahFit().fit(free)
     assert fb.fallback_ and fb.trav_cost_ == 0.125 and fb.summary()["fallback"] is True
     assert "NO ray kind fitted, so the weight is the tracer's default 0.125" in fb.note()

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from experiments.core.probes import decide
 from costmodel.select import (ERR_CAP, GridcostEstimator, HapalaEstimator, Selector, cell_counts,
                               decide_rule, decision_quality, evaluate, exact_rc, havran_stats, kurtosis_refs,
                               max_refs, mean_refs, rc_error, records, select_form, RAY_FORMS, sigma_refs,
@@ -171,9 +172,9 @@ def test_selector_on_real_scenes(spd_calibration, load):
     cal = spd_calibration
     assert (cal.kind == "path").all() and (cal.T_BH > cal.T_BG).all() and (cal.t_RH > 0).all()
     sel = Selector(HapalaEstimator(), kind="path", sample_rays=500).fit(cal)
-    big = sel.decide(load("teapot-in-stadium"), 1e9)
+    big = decide(sel, load("teapot-in-stadium"), 1e9)
     assert big["choice"] == "kdtree" and big["rc_est"] < 1e9 and big["t_hier"] < big["t_grid"] / 10, big
-    small = sel.decide(load("bunny-948"), 1e3)
+    small = decide(sel, load("bunny-948"), 1e3)
     assert small["choice"] == "grid" and small["rc_est"] > 1e3, small
     for out in (big, small):
         assert out["t_build_grid"] > 0 and out["t_build_hier"] > 0 and out["t_grid"] > 0

@@ -21,6 +21,7 @@ import pandas as pd
 
 from costmodel.select import DEFAULT_SAMPLE, GRID_FACTOR, GridcostEstimator, HapalaEstimator, Selector, records
 from experiments.core.common import emit_json
+from experiments.core.probes import decide, probe
 from experiments.core.store import atomic_write
 from costmodel.papers import hapala2011
 from experiments.hapala.lib.calibrate import load_any, measure_all
@@ -75,7 +76,7 @@ def run(ctx, args, log=print) -> dict:
     cal, source = calibration(ctx, args.out, args.quick, log=log)
     sel = Selector(ESTIMATORS[args.estimator](), eps=args.eps, sample_rays=args.sample_rays, kind=args.kind,
                    seed=args.seed).fit(cal)
-    out = sel.decide(scene, args.rays)
+    out = decide(sel, scene, args.rays)
     out.update({"kind": args.kind, "calibration": source, "calibration_scenes": sel.n_calib_,
                 "seconds": round(time.time() - started, 3)})
     return out
@@ -96,7 +97,7 @@ def evaluate(ctx, args, log=print) -> pd.DataFrame:
         t = truth[(truth.scene == name) & (truth.kind == args.kind)].iloc[0]
         sel = Selector(ESTIMATORS[args.estimator](), eps=args.eps, sample_rays=args.sample_rays, kind=args.kind,
                        seed=args.seed).fit(cal[cal.scene != name])
-        _, feats = sel.probe(load_any(name))
+        _, feats = probe(sel, load_any(name))
         for R in EVAL_RAYS:
             d = sel.decide_features(feats, R)
             grid_total, hier_total = t.T_BG + R * t.t_RG, t.T_BH + R * t.t_RH

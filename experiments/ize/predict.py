@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from costmodel.fit import leave_one_out
 from costmodel.memory import EntryRefsCostFit, MemoryCostFit, PaperCountFit, SceneCalibratedFit, aic, calibration_rows
 from experiments.core.store import atomic_write, read_csv
 from experiments.core.target import ensure_input
@@ -186,9 +187,8 @@ def nested_selection(df, scenes, mach) -> pd.DataFrame:
     never seen) picks a model by :func:`_pick`; that model, fitted on the other scenes, is scored on the
     outer scene. Its mean is an estimate of the error on a scene none of the choices saw."""
     rows = []
-    for s in scenes:
-        rest = [r for r in scenes if r != s]
-        inner = {m: float(np.mean([holdout(df, r, [t for t in rest if t != r], m, mach)["mape_pct"] for r in rest]))
+    for s, rest in leave_one_out(scenes):
+        inner = {m: float(np.mean([holdout(df, r, others, m, mach)["mape_pct"] for r, others in leave_one_out(rest)]))
                  for m in POOLED}
         pick = _pick(inner)
         rows.append({"scene": s, "picked": pick, **{f"inner_{m}": v for m, v in inner.items()},
@@ -236,8 +236,7 @@ def speed_accuracy(df, scenes, mach, reps: int, seed: int) -> pd.DataFrame:
         for n_train in sorted({1, min(3, len(scenes) - 1), len(scenes) - 1}):
             for pts in (3, None):
                 for rep in range(reps if n_train < len(scenes) - 1 else 1):
-                    for scene in scenes:
-                        others = [s for s in scenes if s != scene]
+                    for scene, others in leave_one_out(scenes):
                         train = list(rng.choice(others, n_train, replace=False))
                         rows.append({**holdout(df, scene, train, model, mach, pts, rng, calibrate=cal), "rep": rep})
     rows += [per_scene(df, s, mach) for s in scenes]
@@ -273,9 +272,9 @@ def main(ctx, args) -> int:
     if len(scenes) < 3:
         raise GridcostError("cross-scene prediction needs the sweeps of at least three scenes (table2, table3, exponents)")
     mach = memmodel.machine(ctx.quick, log=print)
-    loo = pd.DataFrame([holdout(df, s, [t for t in scenes if t != s], m, mach) for s in scenes for m in POOLED]
-                       + [holdout(df, s, [t for t in scenes if t != s], "memory-aware", mach, calibrate=True)
-                          for s in scenes]
+    loo = pd.DataFrame([holdout(df, s, others, m, mach) for s, others in leave_one_out(scenes) for m in POOLED]
+                       + [holdout(df, s, others, "memory-aware", mach, calibrate=True)
+                          for s, others in leave_one_out(scenes)]
                        + [per_scene(df, s, mach) for s in scenes])
     chosen = choose(loo)
     nested = nested_selection(df, scenes, mach)

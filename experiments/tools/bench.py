@@ -35,7 +35,7 @@ VARIANTS = {
     # perfect splits on clipped triangles (Wald & Havran 2006), pbrt's constants 80:1:0.5
     "kdtree-clip": ("kdtree", {"clip": True}),
     "kdtree-clip-d2": ("kdtree", {"clip": True, "extra_depth": 2}),
-    # (SAH constants fitted on this machine: build(scene, "kdtree", constants=costmodel.kdcost.fit_sah_constants(...))
+    # (SAH constants fitted on this machine: build(scene, "kdtree", constants=experiments.core.probes.measure_sah_constants(...))
     # in the same run; no fitted number is typed in here)
     # clip-d2 with the triangles stored in leaf order (neighbouring leaves' triangles share lines)
     "kdtree-fast": ("kdtree", {"clip": True, "extra_depth": 2, "leaf_order": True}),
@@ -103,9 +103,10 @@ def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
     if params.get("trav_cost") != "fitted":
         return params
     if "bvh_sah_fit" not in out:
-        from costmodel.kdcost import BVH_CALIBRATION, fit_bvh_trav_cost
+        from costmodel.kdcost import BVH_CALIBRATION
+        from experiments.core.probes import measure_bvh_trav_cost
         t0 = time.perf_counter()
-        fit = fit_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
+        fit = measure_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
         out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
         log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
             f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)"

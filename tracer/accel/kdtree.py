@@ -314,7 +314,7 @@ class KdTree(TreeTraceMixin, Accel):
     round(8 + 1.3 floor(log2 N))), ``extra_depth`` (0: added to pbrt's max depth; the clip build spends
     levels on empty cut-offs around re-clipped triangles, 2 more levels pay there), ``clip`` (False: pbrt's build on whole-triangle bounds; True:
     perfect splits on triangles clipped to the node, :mod:`tracer.accel.kdtree_clip`), ``constants``
-    (None, or a fitted estimator with ``ti_over_tt_``, e.g. :func:`costmodel.kdcost.fit_sah_constants`:
+    (None, or a fitted estimator with ``ti_over_tt_``, e.g. :func:`experiments.core.probes.measure_sah_constants`:
     sets ``isect_cost`` to it with ``trav_cost`` 1)."""
 
     _kernel = staticmethod(kd_trace)

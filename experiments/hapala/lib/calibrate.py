@@ -9,8 +9,8 @@ import time
 import numpy as np
 import pandas as pd
 
-from costmodel.select import (GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, probe_grid, records, single_thread,
-                              time_stats)
+from costmodel.select import GRID_FACTOR, PROTOCOL, SAMPLE_SIZES, havran_stats, records, time_stats
+from experiments.core.probes import probe_grid, single_thread
 from experiments.core.common import progress
 from experiments.hapala.lib.claims import STAND_INS
 KINDS = ("random", "path")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from costmodel.fit import leave_one_scene_out
 from costmodel.packet import PacketCostFit, best_config
 from experiments.wald.lib.views import wald_camera
 from tracer.accel.packet import CoherentGrid
@@ -90,11 +91,9 @@ def loso_predictions(df: pd.DataFrame, key: str) -> tuple[pd.DataFrame, pd.DataF
     candidates: the packet model does not describe them."""
     out, best = [], []
     ok = df[df.single_frac <= MAX_SINGLE]
-    scenes = list(dict.fromkeys(df.scene))
-    for name in scenes:
-        train = ok[ok.scene != name] if ok.scene.nunique() > 1 else ok
+    for name, _, mine in leave_one_scene_out(df):
+        train = ok[ok.scene != name] if ok.scene.nunique() > 1 else ok  # one scene: fitted on itself
         fit = PacketCostFit(ray_term=RAY_TERM).fit(model_X(train), train.ns_per_ray)
-        mine = df[df.scene == name]
         pred = mine.assign(predicted=fit.predict(model_X(mine)))
         cand = ok[ok.scene == name]
         b, _ = best_config(fit, pd.concat([cand[["packet", "lam"]], model_X(cand)], axis=1), keys=("packet", "lam"))
