@@ -43,7 +43,10 @@ def add_arguments(p) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--mesh", help="path of your mesh (OBJ, PLY, OFF, STL, GLB)")
     g.add_argument("--scene", help="a named scene")
-    p.add_argument("--rays", type=float, required=True, help="rays R the application will trace")
+    p.add_argument("--rays", type=float, default=None,
+                   help="rays R the application will trace; without it, the budget ranges where each candidate "
+                        "is fastest (1e3..1e10 rays), with a crossover chart (PNG) and JSON")
+    p.add_argument("--image", type=int, default=None, help="camera rays: the side of your square frame in pixels")
     p.add_argument("--kind", choices=("random", "camera", "path"), default="random")
     p.add_argument("--check", action="store_true", help="build and time the best candidates; measured beside predicted")
     p.add_argument("--seed", type=int, default=0)
@@ -63,8 +66,12 @@ def main(ctx, args) -> int:
     from tracer.scenes.scene import load_mesh, load_scene
     from tracer.measure.timing import set_threads
     started = time.time()
-    if not args.rays >= 1:
+    if args.rays is not None and not args.rays >= 1:
         raise GridcostError(f"--rays must be >= 1, got {args.rays:g}")
+    if args.image is not None and not 8 <= args.image <= 8192:
+        raise GridcostError(f"--image must be 8..8192 pixels, got {args.image}")
+    if args.rays is None:
+        return _budgets(ctx, args, started)
     log = (lambda *a: None) if args.json else print
     set_threads(args.threads or 1)
     scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
@@ -101,3 +108,76 @@ def main(ctx, args) -> int:
     else:
         print("\n".join(lines))
     return 0
+
+
+def _budgets(ctx, args, started) -> int:
+    """advise with no --rays: the budget ranges where each candidate is fastest, the crossovers
+    with their intervals and each candidate's memory; chart, JSON, CSV; --check measures a factor 3
+    on both sides of each crossover."""
+    import json
+    from experiments.tools.lib.advising import advice_for
+    from experiments.tools.lib.budgets import R_RANGE, check_budgets, describe
+    from tracer.measure.timing import set_threads
+    from tracer.scenes.scene import load_mesh, load_scene
+    log = (lambda *a: None) if args.json else print
+    set_threads(args.threads or 1)
+    scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
+    adv = advice_for(ctx, scene, args.kind, args.seed, args.image, log)
+    ranges = adv.ranges()
+    memory = {c.label(): c.memory_bytes for c in adv.candidates}
+    res = adv.to_dict()
+    res["summary"] = describe(ranges, memory)
+    checks = []
+    if args.check:
+        n = int(CHECK_RAYS)
+        truth = measure(scene, args.kind, [(c.structure, c.params) for c in adv.candidates], n, seed=args.seed,
+                        image=args.image)
+        for R in check_budgets(ranges):
+            meas = {c.label(): truth[c.structure]["build_s"] + R * truth[c.structure]["ray_s"] for c in adv.candidates}
+            checks.append({"rays": R, "predicted_pick": adv.pick(R).label(), "measured_pick": min(meas, key=meas.get),
+                           "measured_s": meas})
+        res["check"] = checks
+    out_dir = ctx.out / "advise"
+    stem = f"{scene.name}-{args.kind}-budgets"
+    atomic_write(out_dir / f"{stem}.json", json.dumps(res, indent=1, default=float) + "\n")
+    _chart(ctx, adv, checks, stem)
+    lines = [f"# advise: {scene.name} (N = {scene.n:,}), {args.kind} rays at every budget, one thread", "",
+             f"**{res['summary']}**", "", "| structure | build (ms) | per ray (ns) | memory (MiB) | how |", "|---|---|---|---|---|"]
+    for c in adv.candidates:
+        mem = f"{c.memory_bytes / 2 ** 20:.1f}" if c.memory_bytes else "not built"
+        lines.append(f"| {c.label()} | {c.build_s * 1e3:.1f} | {c.ray_s * 1e9:.0f} | {mem} | {c.how} |")
+    for ch in checks:
+        lines.append(f"\n--check at {ch['rays']:.3g} rays: predicted {ch['predicted_pick']}, measured {ch['measured_pick']}")
+    atomic_write(out_dir / "summary.md", "\n".join(lines) + "\n")
+    ctx.write_meta(out_dir, "advise", started, scene=scene.name, kind=args.kind, budgets=list(R_RANGE), check=args.check)
+    if args.json:
+        emit_json(res)
+    else:
+        print("\n".join(lines))
+    return 0
+
+
+def _chart(ctx, adv, checks, stem) -> None:
+    """Predicted build + trace seconds against R, a band per candidate, the measured points of --check."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from experiments.tools.lib.budgets import R_RANGE
+    R = np.logspace(np.log10(R_RANGE[0]), np.log10(R_RANGE[1]), 200)
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for c in adv.candidates:
+        lo, hi = c.band(R)
+        line, = ax.plot(R, c.total_s(R), label=c.label())
+        ax.fill_between(R, lo, hi, color=line.get_color(), alpha=0.2)
+        pts = [(ch["rays"], ch["measured_s"][c.label()]) for ch in checks]
+        if pts:
+            ax.plot(*zip(*pts), "o", color=line.get_color())
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("rays R")
+    ax.set_ylabel("build + trace (s), one thread")
+    ax.set_title(f"{adv.scene}: {adv.kind} rays")
+    ax.legend(fontsize=7)
+    ctx.finish_figure(fig, stem)
+

@@ -59,7 +59,7 @@ def calibration(ctx, log) -> dict:
     key = {"target": "advise-bvh-sah", "scenes": list(BVH_CALIBRATION), "settings": list(BVH_SETTINGS),
            "quick": bool(ctx.quick), **(BVH_SAH_QUICK if ctx.quick else {})}
     pts, cached = ctx.store(code=BVH_SAH_CODE).measure(key, bvh_sah_points, bool(ctx.quick))
-    sah = fit_bvh_trav_cost(points=pts)
+    sah = fit_bvh_trav_cost(pts)
     out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah_note": sah.note()}
     log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: C_trav/C_isect "
         f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})"
@@ -82,12 +82,13 @@ def bvh_sah_points(quick: bool) -> list[dict]:
     """The binary BVH's points of :func:`costmodel.kdcost.fit_bvh_trav_cost` on its calibration
     meshes (fewer rays with ``quick``): measured once per host and code, stored like every point
     (:func:`calibration`)."""
-    from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS, measure_kd_points
+    from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS
+    from experiments.core.probes import measure_kd_points
     return measure_kd_points(BVH_CALIBRATION, settings=BVH_SETTINGS, structure="bvh",
                              **(BVH_SAH_QUICK if quick else {}))
 
 
-def probe_pool(scene, kind: str, seed: int) -> list:
+def probe_pool(scene, kind: str, seed: int, image: int | None = None) -> list:
     """The probes' rays: PROBE_SETS disjoint sets of PROBE_RAYS rays of ``kind``; a timed probe
     traces the next set at each call (:func:`time_structures`), so it never traces a ray twice, as a
     long run does not: repeating one set of 20,000 rays until a sample lasted MIN_SAMPLE_S let
@@ -101,20 +102,22 @@ def probe_pool(scene, kind: str, seed: int) -> list:
     whole frame's, measured on particles-100k and dragon-202k (grid at 8N, BVH, packets): consecutive
     pieces 0.98-1.08; one set of 39 runs of 8 packets spread over the frame and repeated 0.81-1.05
     (repeated rays stay in the caches); 10 such sets in turn 1.07-1.26 (a run's neighbours were
-    evicted since); the whole frame with its packets shuffled 1.27 (particles-100k, grid)."""
+    evicted since); the whole frame with its packets shuffled 1.27 (particles-100k, grid).
+    ``image``: the side of the user's square frame in pixels instead (its coherence is theirs)."""
     import numpy as np
     from tracer.scenes.rays import Rays, make_rays
     if kind != "camera":
         r = make_rays(scene, kind, PROBE_SETS * PROBE_RAYS, seed=seed)
         return [Rays(np.ascontiguousarray(r.origins[k::PROBE_SETS]), np.ascontiguousarray(r.directions[k::PROBE_SETS]),
                      kind, seed) for k in range(PROBE_SETS)]
-    full = make_rays(scene, kind, CHECK_RAYS, seed=seed)
+    full = make_rays(scene, kind, image * image if image else CHECK_RAYS, seed=seed)
     per = max(1, min(PROBE_RAYS // PACKET, full.n // PACKET // PROBE_SETS)) * PACKET
     return [Rays(np.ascontiguousarray(full.origins[k * per:(k + 1) * per]),
                  np.ascontiguousarray(full.directions[k * per:(k + 1) * per]), kind, seed) for k in range(PROBE_SETS)]
 
 
-def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN_SAMPLE_S) -> list[dict]:
+def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN_SAMPLE_S,
+            image: int | None = None) -> list[dict]:
     """Every candidate's predicted build seconds and per-ray seconds with their relative intervals
     (independent of R: :func:`with_totals` adds the totals). The grids, and each hierarchy whose
     build the calibration estimates at most PROBE_BUILD_MAX_S (cheap next to any budget worth
@@ -122,7 +125,7 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
     timed in interleaved rounds, so a busy phase of a shared machine hits all of them alike and
     cannot reorder them); the other hierarchies are estimated from the calibration."""
     from costmodel.select import Selector
-    pool = probe_pool(scene, kind, seed)
+    pool = probe_pool(scene, kind, seed, image)
     rays = pool[0]
     probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
               ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
@@ -130,7 +133,8 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
         probed.append(("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)"))
     ckind = kind if kind in cal else "random"
     # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
-    _, feats = Selector(kind=ckind, sample_rays=1000, seed=seed).probe(scene, rays if kind == ckind else None)
+    from experiments.core.probes import probe as probe_selector
+    _, feats = probe_selector(Selector(kind=ckind, sample_rays=1000, seed=seed), scene, rays if kind == ckind else None)
     out = []
     for hier, (est, rel) in cal[ckind].items():
         T_BH, t_RH = est.predict(feats["N"], feats)
@@ -142,14 +146,15 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
             continue
         how = f"estimated from this host's calibration ({est.n_calib_} scenes, {ckind} rays)"
         out.append({"structure": hier, "params": {}, "how": how, "build_s": float(T_BH), "ray_s": float(t_RH),
-                    "rel_build": rel["build"], "rel_ray": rel["ray"]})
+                    "rel_build": rel["build"], "rel_ray": rel["ray"], "memory_bytes": None})
     got = time_structures(scene, [(s_, p_) for s_, p_, _ in probed], pool, repeats=5, build_repeats=None,
                           min_sample=min_sample)
     for structure, params, how in probed:
         g = got[structure]
         hb, hr = max(PROBE_FLOOR, g["build_spread"] / 2), max(PROBE_FLOOR, g["ray_spread"] / 2)
         out.append({"structure": structure, "params": params, "how": how, "build_s": g["build_s"],
-                    "ray_s": g["ray_s"], "rel_build": (-hb, hb), "rel_ray": (-hr, hr)})
+                    "ray_s": g["ray_s"], "rel_build": (-hb, hb), "rel_ray": (-hr, hr),
+                    "memory_bytes": g.get("memory_bytes")})
     return out
 
 
@@ -211,12 +216,12 @@ def time_structures(scene, structures, rays, repeats: int = 5, build_repeats: in
         b, t = builds[k], np.asarray(tm[k])
         out[k] = {"build_s": float(np.median(b)), "ray_s": float(np.median(t)) / n_rays,
                   "build_spread": float(np.ptp(b) / np.median(b)), "ray_spread": float(np.ptp(t) / np.median(t)),
-                  "rays": n_rays}
+                  "rays": n_rays, "memory_bytes": accs[k].stats().get("memory_bytes")}
     return out
 
 
 def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 0,
-            min_sample: float = MIN_SAMPLE_S) -> dict:
+            min_sample: float = MIN_SAMPLE_S, image: int | None = None) -> dict:
     """The measured truth of ``structures`` on ``n_rays`` fresh rays of ``kind`` (seed + 1: other
     rays than the probes'; camera rays: the probes' view and resolution with every pixel's ray
     jittered inside the pixel, as a renderer's next frame, since the unjittered frame is the
@@ -224,8 +229,20 @@ def measure(scene, kind, structures, n_rays: int, repeats: int = 5, seed: int = 
     import numpy as np
     from tracer.scenes.rays import camera_rays, make_rays
     if kind == "camera":
-        side = max(1, int(round(np.sqrt(n_rays))))
-        rays = camera_rays(scene, side, max(1, int(n_rays) // side), seed=seed + 1, jitter=True)
+        side = image or max(1, int(round(np.sqrt(n_rays))))
+        rows = image or max(1, int(n_rays) // side)
+        rays = camera_rays(scene, side, rows, seed=seed + 1, jitter=True)
     else:
         rays = make_rays(scene, kind, int(n_rays), seed=seed + 1)
     return time_structures(scene, structures, rays, repeats, repeats, min_sample)
+
+
+def advice_for(ctx, scene, kind: str, seed: int = 0, image: int | None = None, log=lambda *a: None):
+    """Every candidate's prediction for ``scene`` and ``kind`` (independent of the budget) as an
+    :class:`~experiments.tools.lib.budgets.Advice`: the host's calibration (stored in ``ctx``'s
+    point store), then :func:`predict`."""
+    from experiments.tools.lib.budgets import Advice, Candidate
+    cal = calibration(ctx, log)
+    cands = predict(scene, kind, cal, seed, log, image=image)
+    return Advice(scene.name, scene.n, kind, [Candidate.from_dict(c) for c in cands], image)
+
