@@ -68,7 +68,14 @@ def scene_bounds(tris: np.ndarray) -> np.ndarray:
     # pad outward (BOUNDS_PAD of the largest extent) so rays through boundary vertices/edges
     # meet the box despite rounding in the slab test
     margin = BOUNDS_PAD * max(float(ext.max()), 1e-6)
-    return np.stack([lo - margin, hi + margin]).astype(np.float32)
+    box = np.stack([lo - margin, hi + margin]).astype(np.float32)
+    # far from the origin the float32 spacing exceeds both pads and rounding to nearest loses them
+    # (a flat mesh at z = 1e5 got a box of zero thickness); then step one float32 outward, so the
+    # box always holds every vertex strictly inside
+    vlo, vhi = v.min(axis=0), v.max(axis=0)
+    box[0] = np.where(box[0] < vlo, box[0], np.nextafter(np.minimum(box[0], vlo), np.float32(-np.inf)))
+    box[1] = np.where(box[1] > vhi, box[1], np.nextafter(np.maximum(box[1], vhi), np.float32(np.inf)))
+    return box
 
 
 def validate(tris: np.ndarray, where: str) -> dict:
