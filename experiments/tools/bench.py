@@ -18,7 +18,7 @@ import time
 from experiments.core.common import add_scene_args, emit_json, scene_from_args
 from experiments.core.store import atomic_write, write_json
 from experiments.core.common import progress
-from tracer.accel import build
+from tracer.accel import build, plugin_structures
 from tracer.measure.memory import memory_budget
 from tracer.scenes.rays import make_rays
 from tracer.measure.timing import build_clock, host_info, set_threads, time_call
@@ -50,6 +50,11 @@ VARIANTS = {
 }
 
 
+def default_names() -> list[str]:
+    """What bench runs by default: every variant, every registered structure, Embree and trimesh."""
+    return [*VARIANTS, *plugin_structures(), "embree", "trimesh"]
+
+
 #: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
 PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "cgt")
 
@@ -71,8 +76,9 @@ def add_arguments(p) -> None:
     add_scene_args(p, default_scene="bunny-69k")
     p.add_argument("--rays", type=int, default=200_000, help="rays per kind (default 200000)")
     p.add_argument("--repeats", type=int, default=5, help="timed repeats after warm-up (default 5)")
-    p.add_argument("--structures", default=",".join(VARIANTS) + ",embree,trimesh",
-                   help="comma-separated variants to run")
+    p.add_argument("--structures", default=None,
+                   help="comma-separated variants to run (default: every variant below, the structures other "
+                        "packages register by entry point, embree, trimesh)")
     p.add_argument("--trimesh-rays", type=int, default=2000, help="rays for trimesh's tracer")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sah-scenes", default=None,
@@ -148,8 +154,8 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
                      for k, r in rays.items()}
             row, _ = _bench_one(lambda: TrimeshAccel().build(scene), small, 1, counters=False)
             row["rays"] = k_rays
-        elif name in VARIANTS:
-            struct, params = VARIANTS[name]
+        elif name in VARIANTS or name in plugin_structures():
+            struct, params = VARIANTS.get(name, (name, {}))
             params = _fitted_params(params, out, sah_scenes, log)
             row, accel = _bench_one(lambda: build(scene, struct, **params), rays, repeats)
             if name in PAIRED:
@@ -157,7 +163,7 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             row["params"] = params
         else:
             from tracer.errors import GridcostError
-            raise GridcostError(f"bench: unknown structure {name!r}; known: {', '.join(VARIANTS)}, embree, trimesh")
+            raise GridcostError(f"bench: unknown structure {name!r}; known: {', '.join(default_names())}")
         out["structures"][name] = row
         log(f"  {name:13s} build {row['build_s'] * 1e3:9.1f} ms   random {row.get('random_mrays', 0):7.3f} "
             f"Mrays/s   camera {row.get('camera_mrays', 0):7.3f} Mrays/s   ({time.perf_counter() - t0:.0f} s)")
@@ -218,7 +224,8 @@ def _paired(rays, kept, threads, log, rounds: int = 7) -> dict:
 
 def main(ctx, args) -> int:
     scene = scene_from_args(args)
-    names = [n.strip() for n in args.structures.split(",") if n.strip()]
+    names = ([n.strip() for n in args.structures.split(",") if n.strip()] if args.structures
+             else default_names())
     log = (lambda *a, **k: None) if args.json else print
     log(f"bench {scene.name}: {scene.n:,} faces, {args.rays:,} rays per kind, threads={args.threads or 'all'}")
     sah = [n.strip() for n in args.sah_scenes.split(",") if n.strip()] if args.sah_scenes else None

@@ -6,4 +6,5 @@ measurement key (:func:`tracer.measure.provenance.kernel_digest`); scene data an
 The interface (:mod:`tracer.accel.base`) is re-exported here: ``from tracer.accel import build``.
 """
 from tracer.accel.base import (COUNTER_NAMES, STRUCTURES, Accel, Counters, Hits, TreeTraceMixin, as_rays,  # noqa: F401
+                               plugin_structures, structure_class, structures,
                                build, tmax_array)

@@ -12,7 +12,9 @@ variant with no counter code in it), so the timed path is not slowed by counting
 """
 from __future__ import annotations
 
+import functools
 import importlib
+import importlib.metadata
 from typing import NamedTuple
 
 import numba
@@ -34,7 +36,12 @@ COUNTER_SCHEMA = {
 }
 COUNTER_NAMES = tuple(COUNTER_SCHEMA)
 
-#: structure name -> "module:Class"
+#: the entry-point group through which another package adds a structure: in its pyproject.toml,
+#: ``[project.entry-points."gridcost.structures"]`` ``mine = "mypkg.mine:MyAccel"`` (an
+#: :class:`Accel` subclass); verify, bench and advise then take ``mine`` with no edit to gridcost
+ENTRY_POINT_GROUP = "gridcost.structures"
+
+#: the built-in structures: name -> "module:Class"
 STRUCTURES = {
     "grid": "tracer.accel.grid:UniformGrid",
     "nested": "tracer.accel.nested:NestedGrid",
@@ -151,12 +158,48 @@ class TreeTraceMixin:
         return out_t, out_id, cnt
 
 
+@functools.lru_cache(maxsize=None)
+def _registered() -> tuple[tuple[str, str], ...]:
+    """(name, "module:Class") of every structure installed packages declare in :data:`ENTRY_POINT_GROUP`."""
+    return tuple((ep.name, ep.value) for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP))
+
+
+def structures() -> dict[str, str]:
+    """Every structure :func:`build` knows: name -> "module:Class", the built-in :data:`STRUCTURES`
+    first, then those registered by entry points. A registered name that shadows a built-in one is
+    an error (it would silently change what every target measures)."""
+    out = dict(STRUCTURES)
+    for name, value in _registered():
+        if name in STRUCTURES:
+            raise GridcostError(f"the entry point {name!r} = {value!r} in group {ENTRY_POINT_GROUP!r} shadows "
+                                f"gridcost's built-in structure {name!r}; rename it")
+        out[name] = value
+    return out
+
+
+def plugin_structures() -> tuple[str, ...]:
+    """Names of the structures registered from outside gridcost (entry points), in registration order."""
+    return tuple(name for name in structures() if name not in STRUCTURES)
+
+
+def structure_class(name: str) -> type:
+    """The :class:`Accel` subclass of structure ``name`` (a built-in or a registered one)."""
+    known = structures()
+    if name not in known:
+        raise GridcostError(f"unknown structure {name!r}; known: {', '.join(known)}")
+    modname, _, clsname = known[name].partition(":")
+    try:
+        cls = getattr(importlib.import_module(modname), clsname)
+    except (ImportError, AttributeError) as exc:
+        raise GridcostError(f"structure {name!r}: cannot load {known[name]!r} ({exc})") from None
+    if not (isinstance(cls, type) and issubclass(cls, Accel)):
+        raise GridcostError(f"structure {name!r}: {known[name]!r} is not a subclass of tracer.accel.base.Accel")
+    return cls
+
+
 def build(scene, name: str = "grid", **params) -> Accel:
-    """Build structure ``name`` (one of :data:`STRUCTURES`) over ``scene`` with ``params``."""
-    if name not in STRUCTURES:
-        raise GridcostError(f"unknown structure {name!r}; known: {', '.join(STRUCTURES)}")
-    modname, clsname = STRUCTURES[name].split(":")
-    cls = getattr(importlib.import_module(modname), clsname)
+    """Build structure ``name`` (one of :func:`structures`: built-in or registered) over ``scene`` with ``params``."""
+    cls = structure_class(name)
     try:
         inst = cls(**params)
     except TypeError as exc:  # an unknown or missing parameter is the caller's input error

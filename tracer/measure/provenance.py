@@ -139,6 +139,30 @@ def kernel_digest() -> str:
     return _digest_files(kernel_files())
 
 
+def plugin_digest() -> str:
+    """Digest of the modules of the structures registered from outside gridcost (entry points of
+    :data:`tracer.accel.base.ENTRY_POINT_GROUP`), "" when there are none: a point measured with a
+    registered structure is keyed by that structure's source too. Found by their import spec, not
+    imported; a module whose source cannot be found is keyed by its name and the package version."""
+    import importlib.util
+
+    from tracer.accel.base import _registered
+    parts, files = [], []
+    for name, value in _registered():
+        mod = value.partition(":")[0]
+        try:
+            spec = importlib.util.find_spec(mod)
+        except (ImportError, ValueError):
+            spec = None
+        if spec is not None and spec.origin and Path(spec.origin).is_file():
+            files.append(Path(spec.origin))
+        else:
+            parts.append(f"{name}={value}")
+    if not parts and not files:
+        return ""
+    return hashlib.sha256((";".join(parts) + (_digest_files(files) if files else "")).encode()).hexdigest()
+
+
 def numba_cache_dir() -> Path:
     """Where compiled kernels are cached: ``<base>/numba/<kernel digest[:16]>``, base being
     ``$GRIDCOST_NUMBA_CACHE`` or ``$GRIDCOST_CACHE`` or ``~/.cache/gridcost``."""
@@ -179,13 +203,13 @@ def library_versions() -> dict:
 
 
 def measurement_key(code_paths: tuple[str, ...], threads: int, clock: str) -> dict:
-    """The key of a measurement: the kernel digest, and the digest of :data:`MEASURE_FILES` and
+    """The key of a measurement: the kernel digest (and :func:`plugin_digest`), and the digest of :data:`MEASURE_FILES` and
     ``code_paths`` (files or package folders relative to the repository: the experiment and
     cost-model code that shapes the point),
     the Numba thread count, the clock, the CPU model and :data:`KEY_LIBRARIES` versions. Hosts with
     the same CPU share points (the host is recorded per row, not keyed).
     :func:`tracer.measure.timing.measurement_key` fills in the current threads and clock."""
-    code = hashlib.sha256((kernel_digest() + source_digest(*MEASURE_FILES, *sorted(code_paths))).encode())
+    code = hashlib.sha256((kernel_digest() + plugin_digest() + source_digest(*MEASURE_FILES, *sorted(code_paths))).encode())
     return {"code": code.hexdigest()[:16], "threads": int(threads),
             "clock": clock, "cpu": cpu_model(), "versions": library_versions()}
 

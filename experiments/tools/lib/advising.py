@@ -125,12 +125,15 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
     timed in interleaved rounds, so a busy phase of a shared machine hits all of them alike and
     cannot reorder them); the other hierarchies are estimated from the calibration."""
     from costmodel.select import Selector
+    from tracer.accel import plugin_structures
     pool = probe_pool(scene, kind, seed, image)
     rays = pool[0]
     probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
               ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
     if kind == "camera":
         probed.append(("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)"))
+    # structures other packages register (entry points, tracer.accel.base.structures) are probed like the grids
+    probed += [(name, {}, "probed (registered by an entry point)") for name in plugin_structures()]
     ckind = kind if kind in cal else "random"
     # the decision algorithm's probe (a grid of N cells, 1000 sampled rays): the estimators' features
     from experiments.core.probes import probe as probe_selector
