@@ -24,6 +24,7 @@ TARGETS: dict[str, tuple[str, str]] = {
     "derive": ("experiments.ize.derive", "sympy derivations of every Ize 2007 cost model vs the paper"),
     "table2": ("experiments.ize.table2", "Ize Table 2: one-level grid, theoretical M vs best swept M"),
     "fit": ("experiments.ize.fit", "sweep one scene, fit Tsetup/Ts/Ti with CIs, choose the model, predict M"),
+    "vtk-timings": ("experiments.tools.vtk_timings", "time VTK's uniform grid (vtkStaticCellLocator) to validate fit --timings on it"),
     "table4": ("experiments.ize.table4", "Ize Table 4: two-level grids, M1 = (8N)^0.6, M2 = 8N2 vs swept M1"),
     "ize-levels": ("experiments.ize.levels", "Ize Sec 4.3: three-level grids (Eq 16) vs two levels and the best one-level grid"),
     "ize-skinny2": ("experiments.ize.skinny2", "Ize Sec 4.4: two-level long-skinny rule (Eq 17) vs the compact rule on cylinders"),

@@ -1,7 +1,13 @@
 """``fit``: sweep one scene's one-level grid resolution, fit the Ize constants two ways (runtime
 against m, Eq 1/Eq 5; runtime against the tracer's counters), print them with bootstrap CIs, R²,
 MAPE, the chosen model (cross-validation + AIC), and the predicted optimum M measured against the
-swept best."""
+swept best.
+
+``fit --timings my.csv --mesh my.obj`` fits the same model to *your own* uniform grid instead: your
+trace times at a few resolutions against the work gridcost counts on the same grids
+(:mod:`experiments.core.usergrid`): your Tsetup, Ts, Ti with bootstrap CIs, how well the model
+explains your times (R², leave-one-resolution-out errors), your predicted best resolution, and a
+constants file for ``advise --constants``."""
 from __future__ import annotations
 
 import json
@@ -26,6 +32,14 @@ def add_arguments(p) -> None:
     p.add_argument("--rays", type=int, default=None, help="random rays per point (default 100000; --quick 10000)")
     p.add_argument("--repeats", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
+    u = p.add_argument_group("your own grid (fit --timings)")
+    u.add_argument("--timings", help="CSV of your grid's trace times: cells (or nx, ny, nz), rays, seconds per row")
+    u.add_argument("--kind", default="random", choices=["random", "camera", "path"],
+                   help="the kind of rays you timed (gridcost counts work on rays of that kind)")
+    u.add_argument("--rays-file", help="the very rays you timed: .npz with origins, directions (m x 3)")
+    u.add_argument("--grid-param", action="append", default=[],
+                   help="gridcost grid parameter that matches your grid, e.g. exact=false for bounding-box "
+                        "insertion (repeatable)")
 
 
 def _ci(c):
@@ -33,6 +47,8 @@ def _ci(c):
 
 
 def main(ctx, args) -> int:
+    if args.timings:
+        return _fit_timings(ctx, args)
     started = time.time()
     threads = set_threads(args.threads or 1)
     scene = scene_from_args(args)
@@ -121,4 +137,53 @@ def _summary(out: dict, sel: dict, points: int) -> str:
     lines += ["", f"Predicted optimum M = {out['m_pred']:,.0f} ({out['m_pred_from']}); best swept M = "
               f"{out['m_best']:,.0f}; penalty of the predicted M re-timed side by side with the three fastest "
               f"swept M: {out['penalty']:.1f} % (rounds {out['penalty_range'][0]:.1f} – {out['penalty_range'][1]:.1f} %)."]
+    return "\n".join(lines) + "\n"
+
+
+def _fit_timings(ctx, args) -> int:
+    """``fit --timings``: your constants, your model error, your predicted best resolution."""
+    from experiments.core.common import parse_params
+    from experiments.core.usergrid import constants_record, counting_rays, fit_timings, read_timings
+    started = time.time()
+    timings = read_timings(args.timings)  # bad input fails before anything is built
+    scene = scene_from_args(args)
+    params = parse_params(args.grid_param)
+    rays = counting_rays(scene, args.kind, args.seed, args.rays_file)
+    res = fit_timings(timings, scene, rays, params)
+    rec = constants_record(res, scene, args.kind if not args.rays_file else f"{args.kind} (your rays)", params,
+                           str(args.timings))
+    out_dir = Path(args.out) / "fit"
+    ctx.write_csv(out_dir / f"{scene.name}-timings.csv", res["work"])
+    ctx.write_csv(out_dir / f"{scene.name}-candidates.csv", res["recommendation"]["table"])
+    write_json(out_dir / f"{scene.name}-constants.json", rec)
+    atomic_write(out_dir / "summary.md", _timings_summary(rec))
+    ctx.write_meta(out_dir, "fit", started, scene=scene.name, timings=str(args.timings), counted_rays=rays.n)
+    if args.json:
+        json.dump(rec, sys.stdout, default=float)
+        print()
+        return 0
+    print(_timings_summary(rec), end="")
+    print(f"constants for advise --constants: {out_dir / f'{scene.name}-constants.json'}")
+    return 0
+
+
+def _timings_summary(rec: dict) -> str:
+    c, ci, b = rec["constants"], rec["ci"], rec["predicted_best"]
+    on = rec["fitted_on"]
+    lines = [f"# Your grid's cost model, fitted on {on['mesh']} (N = {on['N']:,}; {on['rows']} resolutions; "
+             f"{on['rays']} rays)", "", f"Model: {rec['model']}", "",
+             "| constant | fitted (ns per unit of work) | 95 % CI |", "|---|---|---|"]
+    lines += [f"| {k} | {c[k] * 1e9:.3f} | {ci[k][0] * 1e9:.3f} – {ci[k][1] * 1e9:.3f} |" for k in c]
+    lines += ["", f"How well it explains your times: R² {rec['r2']:.4f}, mean error {rec['mape']:.1f} % (max "
+              f"{rec['max_ape']:.1f} %) on the fitted rows; leaving each resolution out in turn, "
+              f"{rec['loo_mape']:.1f} % (max {rec['loo_max']:.1f} %).", "",
+              "| nx | ny | nz | cells | setups | steps | tests per ray | your s/ray | fitted s/ray | left-out error % |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['nx']} | {r['ny']} | {r['nz']} | {r['cells']:,} | {r['setups']:.3f} | {r['steps']:.2f} | "
+              f"{r['tests']:.2f} | {r['seconds_per_ray']:.3e} | {r['fitted_s_per_ray']:.3e} | {r['loo_error_pct']:+.1f} |"
+              for r in rec["rows"]]
+    rng = rec["predicted_cells_range"]
+    lines += ["", f"Predicted best resolution: {b['nx']} x {b['ny']} x {b['nz']} = {b['cells']:,} cells "
+              f"({b['cells'] / on['N']:.2f} N), {b['predicted_s_per_ray'] * 1e9:.1f} ns per ray"
+              + (f"; the best under 5 %+ of the bootstrap's constants spans {rng[0]:,} – {rng[1]:,} cells." if rng else ".")]
     return "\n".join(lines) + "\n"

@@ -50,6 +50,8 @@ def add_arguments(p) -> None:
     p.add_argument("--kind", choices=("random", "camera", "path"), default="random")
     p.add_argument("--check", action="store_true", help="build and time the best candidates; measured beside predicted")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--constants", help="constants JSON of `fit --timings` (your own grid): recommend your grid's "
+                                       "resolution for this mesh, in your units")
 
 
 def _check(scene, kind, R, cands, seed) -> None:
@@ -70,6 +72,8 @@ def main(ctx, args) -> int:
         raise GridcostError(f"--rays must be >= 1, got {args.rays:g}")
     if args.image is not None and not 8 <= args.image <= 8192:
         raise GridcostError(f"--image must be 8..8192 pixels, got {args.image}")
+    if args.constants:
+        return _your_grid(ctx, args, started)
     if args.rays is None:
         return _budgets(ctx, args, started)
     log = (lambda *a: None) if args.json else print
@@ -181,3 +185,41 @@ def _chart(ctx, adv, checks, stem) -> None:
     ax.legend(fontsize=7)
     ctx.finish_figure(fig, stem)
 
+
+
+def _your_grid(ctx, args, started) -> int:
+    """advise --constants: your grid's best resolution on this mesh, from the constants ``fit
+    --timings`` fitted to your timings, applied to the work gridcost counts here."""
+    import json
+    from pathlib import Path
+
+    from experiments.core.usergrid import counting_rays, fit_from_record, recommend
+    from tracer.scenes.scene import load_mesh, load_scene
+    try:
+        rec = json.loads(Path(args.constants).read_text())
+    except (OSError, ValueError) as exc:
+        raise GridcostError(f"--constants {args.constants}: cannot read it as JSON ({exc})") from None
+    fit = fit_from_record(rec)
+    scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
+    rays = counting_rays(scene, args.kind, args.seed)
+    out = recommend(fit, scene, rays, rec.get("grid_params") or {}, budget_rays=args.rays)
+    table = out.pop("table")
+    top = table.sort_values("predicted_s_per_ray").head(5)
+    b = out["best"]
+    text = (f"# Your grid on {scene.name} (N = {scene.n:,}), {args.kind} rays, constants fitted on "
+            f"{rec['fitted_on']['mesh']} ({args.constants})\n\n"
+            f"Best resolution: {b['nx']} x {b['ny']} x {b['nz']} = {b['cells']:,} cells ({out['best_factor']:.2f} N), "
+            f"predicted {b['predicted_s_per_ray'] * 1e9:.1f} ns per ray in your units"
+            + (f", {b['predicted_s']:.3g} s for {args.rays:.3g} rays" if args.rays else "") + ".\n\n"
+            "| nx | ny | nz | cells | predicted ns/ray | memory (MB, gridcost's layout) |\n|---|---|---|---|---|---|\n"
+            + "".join(f"| {r.nx} | {r.ny} | {r.nz} | {r.cells:,} | {r.predicted_s_per_ray * 1e9:.1f} | "
+                      f"{(r.memory_bytes or 0) / 1e6:.1f} |\n" for r in top.itertuples()))
+    out_dir = ctx.out / "advise"
+    ctx.write_csv(out_dir / f"{scene.name}-your-grid.csv", table)
+    atomic_write(out_dir / "summary.md", text)
+    ctx.write_meta(out_dir, "advise", started, scene=scene.name, constants=str(args.constants))
+    if args.json:
+        emit_json(out)
+        return 0
+    print(text, end="")
+    return 0
