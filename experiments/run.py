@@ -220,13 +220,18 @@ def _run(args, settings) -> int:
             return _run_target(args.target, ctx, args)
         _refuse_dirty(ctx, args)
         failed = {}
-        for name in ALL_ORDER:
+        from experiments.core.common import expected_seconds, overall_progress
+        bar = overall_progress(expected_seconds(args.out, ALL_ORDER, args.quick), quiet=getattr(args, "json", False))
+        for i, name in enumerate(ALL_ORDER):
+            bar.start(name)
             try:
                 rc = _run_target(name, ctx, _sub_args(name, args))
                 if rc:
                     failed[name] = rc
             except Exception as exc:
                 failed[name] = _failure(name, exc, args.debug)
+            bar.advance(name, ALL_ORDER[i + 1] if i + 1 < len(ALL_ORDER) else None)
+        bar.close()
         if failed:
             print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
                   + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)

@@ -94,3 +94,40 @@ def progress(iterable, desc: str, total: int | None = None, quiet: bool = False,
     from tqdm import tqdm
     disable = True if quiet or os.environ.get("TQDM_DISABLE") == "1" else None
     return tqdm(iterable, desc=desc, total=total, unit=unit, leave=False, disable=disable, dynamic_ncols=True)
+
+
+def expected_seconds(out_dir, names, quick: bool) -> dict[str, float]:
+    """Each target's wall time in the last run of the same kind (quick or full) into ``out_dir``
+    (its meta.json), the median of the known ones where a target has none: the weights of the
+    overall ETA of ``all``."""
+    import json
+    from pathlib import Path
+    known = {}
+    for name in names:
+        try:
+            meta = json.loads((Path(out_dir) / name / "meta.json").read_text())
+            if bool(meta.get("quick")) == bool(quick) and float(meta["wall_seconds"]) > 0:
+                known[name] = float(meta["wall_seconds"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    default = sorted(known.values())[len(known) // 2] if known else 60.0
+    return {name: known.get(name, default) for name in names}
+
+
+def overall_progress(weights: dict[str, float], quiet: bool = False):
+    """One bar over the whole plan of ``all`` (every target, weighted by its expected seconds, so the
+    ETA is in time rather than in targets), kept above the per-target bars; ``advance(name)`` after
+    each target, ``close()`` at the end."""
+    import os
+
+    from tqdm import tqdm
+    disable = True if quiet or os.environ.get("TQDM_DISABLE") == "1" else None
+    bar = tqdm(total=round(sum(weights.values())), desc="all", unit="s", position=0, leave=True, disable=disable,
+               dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {postfix} [{elapsed}<{remaining}]")
+
+    def advance(name: str, nxt: str | None = None):
+        bar.update(round(weights[name]))
+        bar.set_postfix_str(f"next {nxt}" if nxt else "done")
+
+    bar.advance, bar.start = advance, (lambda name: bar.set_postfix_str(f"running {name}"))
+    return bar
