@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from tracer.accel.geometry import ray_triangle
 from tracer.accel.simd import slab4
+from tracer.accel.simd_tri import ray_tri4
 
 
 @njit
@@ -55,3 +57,57 @@ def test_slab4_matches_the_scalar_code():
         np.testing.assert_array_equal(t4.view(np.int32), want_t4.view(np.int32))
         seen.add(mask)
     assert 0 in seen and 15 in seen and len(seen) >= 10  # misses, all four hit, and mixed masks
+
+
+@njit
+def _tri4(tri, base, ray, tmin, tmax, t4):
+    return ray_tri4(tri, base, ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], tmin, tmax, t4)
+
+
+@njit
+def _tri1(v, ray, tmin, tmax):
+    return ray_triangle(ray[0], ray[1], ray[2], ray[3], ray[4], ray[5], v[0], v[1], v[2], v[3], v[4], v[5],
+                        v[6], v[7], v[8], tmin, tmax)
+
+
+def _block(verts):
+    """(4, 9) float32 triangles [a, b, c] -> the 36-word SoA block of tracer.accel.simd_tri."""
+    return np.ascontiguousarray(verts.T).ravel()
+
+
+def test_ray_tri4_matches_ray_triangle_bit_for_bit():
+    """Each lane equals geometry.ray_triangle (t bits and hit/miss), on rays aimed at vertices and
+    edges (edge-inclusive ties), back faces, grazing rays, degenerate (padding) triangles and a
+    block offset inside a larger array, with finite and infinite limits."""
+    rng = np.random.default_rng(1)
+    kinds = {"hit": 0, "miss": 0}
+    for trial in range(4000):
+        v = rng.uniform(-1, 1, (4, 9)).astype(np.float32)
+        if trial % 11 == 0:  # padding: a degenerate triangle (three equal vertices)
+            v[trial % 4, 3:6] = v[trial % 4, :3]
+            v[trial % 4, 6:9] = v[trial % 4, :3]
+        o = rng.uniform(-3, 3, 3)
+        lane = trial % 4
+        w = rng.dirichlet([1, 1, 1])
+        if trial % 3 == 0:  # aim at a vertex or an edge midpoint of one lane
+            w = [np.array([1.0, 0, 0]), np.array([0.5, 0.5, 0]), np.array([0, 0.5, 0.5])][trial % 9 // 3]
+        target = w[0] * v[lane, :3] + w[1] * v[lane, 3:6] + w[2] * v[lane, 6:9]
+        d = target.astype(np.float64) - o
+        if trial % 13 == 0:  # grazing: along the lane's plane
+            e1 = v[lane, 3:6].astype(np.float64) - v[lane, :3]
+            d = e1 + 1e-9 * rng.normal(size=3)
+        o = o.astype(np.float32).astype(np.float64)
+        d = d.astype(np.float32).astype(np.float64)
+        ray = np.concatenate([o, d])
+        tmin, tmax = 0.0, (np.inf if trial % 2 else float(rng.uniform(0.3, 1.5)))
+        pad = trial % 5
+        tri = np.concatenate([np.zeros(pad, np.float32), _block(v)])
+        t4 = np.empty(4, np.float64)
+        mask = _tri4(tri, np.uint64(pad), ray, tmin, tmax, t4)
+        for k in range(4):
+            want = _tri1(v[k], ray, tmin, tmax)
+            hit = bool(mask >> k & 1)
+            assert hit == np.isfinite(want), (trial, k)
+            assert t4[k].view(np.int64) == np.float64(want).view(np.int64), (trial, k, t4[k], want)
+            kinds["hit" if hit else "miss"] += 1
+    assert kinds["hit"] > 2000 and kinds["miss"] > 4000, kinds
