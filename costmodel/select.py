@@ -59,13 +59,6 @@ def rc_error(r_est, r_true, cap: float = ERR_CAP):
     return np.where(np.isfinite(r_true), err, np.nan)
 
 
-# ============================================================ timing of the calibration and the decision's sample
-def time_stats(runs) -> dict:
-    """Median and minimum of repeated timings (interference only ever adds time: the minimum is the
-    less noisy estimate on a shared machine, the median the conventional one)."""
-    return {"median": float(np.median(runs)), "min": float(np.min(runs))}
-
-
 def _pick(v, stat):
     return v[stat] if isinstance(v, dict) else v
 
@@ -501,3 +494,66 @@ def loo_errors(cal: pd.DataFrame, make_estimator, eps: float = HAPALA_EPS) -> pd
     df = pd.DataFrame(out)
     df["err"] = rc_error(df["R_est"], df["R_C"])
     return df
+
+
+# ============================================================ the decision against its baselines
+#: ray budgets of the selector's evaluation: 10^4 ... 10^9, two per decade, so that both answers occur
+EVAL_R = np.logspace(4, 9, 11)
+#: the policies a decision is scored against: the selector, the two fixed answers and the oracle
+POLICIES = ("selector", "always grid", "always hierarchy", "oracle")
+
+
+def loo_decisions(cal: pd.DataFrame, make_estimator, R=EVAL_R, eps: float = HAPALA_EPS) -> pd.DataFrame:
+    """Every scene of ``cal`` (one ray kind, one hierarchy) left out of its own calibration and decided
+    at every budget R: the selector keeps the grid iff R <= R_est (steps 5-8 on the estimated times,
+    :func:`loo_errors`); "always grid", "always hierarchy" and the oracle (the faster true total,
+    :func:`total_times`) beside it. One row per (scene, R) with each policy's pick and time lost in %
+    over the oracle's total."""
+    cal = cal.reset_index(drop=True)
+    loo = loo_errors(cal, make_estimator, eps).set_index("scene")
+    R = np.asarray(R, float)
+    tg, th = total_times(cal, R)
+    rows = []
+    for i, r in cal.iterrows():
+        est = loo.loc[r["scene"]]
+        for j, n in enumerate(R):
+            best = min(tg[i, j], th[i, j])
+            picks = {"selector": n <= est["R_est"], "always grid": True, "always hierarchy": False,
+                     "oracle": tg[i, j] <= th[i, j]}
+            row = {"scene": r["scene"], "N": int(r["N"]), "R": n, "R_C": float(r["R_C"]), "R_est": float(est["R_est"]),
+                   "t_RG_sample": float(r["t_RG_sample"]), "t_RH_est": float(est["t_RH_est"]),
+                   "t_RG_est": float(est["t_RG_est"]), "t_RH": float(r["t_RH"]), "t_RG": float(r["t_RG"])}
+            for p, grid in picks.items():
+                row[f"pick {p}"] = "grid" if grid else "hierarchy"
+                row[f"lost {p}"] = 100.0 * ((tg[i, j] if grid else th[i, j]) / best - 1.0)
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def policy_scores(decisions: pd.DataFrame) -> pd.DataFrame:
+    """Per policy of :data:`POLICIES`: correct picks (the oracle's answer, or a tie), their share, and
+    the time lost over the oracle's total (mean and worst of the per-decision %)."""
+    out = []
+    for p in POLICIES:
+        lost = decisions[f"lost {p}"].to_numpy(float)
+        out.append({"policy": p, "decisions": int(lost.size), "correct": int((lost <= 1e-9).sum()),
+                    "correct_pct": 100.0 * float((lost <= 1e-9).mean()) if lost.size else np.nan,
+                    "lost_mean_pct": float(lost.mean()) if lost.size else np.nan,
+                    "lost_max_pct": float(lost.max()) if lost.size else np.nan})
+    return pd.DataFrame(out)
+
+
+def step5_diagnosis(cal: pd.DataFrame, make_estimator, eps: float = HAPALA_EPS) -> dict:
+    """Why step 5 ("t_R^H >= t_R^G: keep the grid") fires: the share of scenes whose held-out t_R^H
+    estimate is at least the grid time the decision sees, the measured per-ray margin (median
+    t_R^G / t_R^H: how small an estimation error flips step 5), and how the Eq 8 constant
+    (t_R^H / log2 N) spreads over the calibration scenes (its mean against its median: a few scenes
+    where the hierarchy is slow pull the mean, and with it every estimate, up)."""
+    loo = loo_errors(cal.reset_index(drop=True), make_estimator, eps)
+    k = _col(cal, "t_RH") / _log2n(_col(cal, "N"))
+    ratio = _col(cal, "t_RG") / _col(cal, "t_RH")
+    return {"scenes": int(len(loo)), "step5_share": float((loo["t_RH_est"] >= loo["t_RG_est"]).mean()),
+            "median_tG_over_tH": float(np.median(ratio)), "hier_slower_share": float((ratio < 1).mean()),
+            "eq8_k_mean": float(np.mean(k)), "eq8_k_median": float(np.median(k)),
+            "median_est_over_true_tH": float(np.median(loo["t_RH_est"] / loo["t_RH"])),
+            "median_est_over_true_tG": float(np.median(loo["t_RG_est"] / loo["t_RG"]))}

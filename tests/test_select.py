@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from experiments.core.probes import decide
-from costmodel.select import (ERR_CAP, GridcostEstimator, HapalaEstimator, Selector, cell_counts,
+from costmodel.select import (ERR_CAP, loo_decisions, policy_scores, step5_diagnosis, GridcostEstimator, HapalaEstimator, Selector, cell_counts,
                               decide_rule, decision_quality, evaluate, exact_rc, havran_stats, kurtosis_refs,
                               max_refs, mean_refs, rc_error, records, select_form, RAY_FORMS, sigma_refs,
                               skewness_refs, sparseness_cells, sparseness_eq1, variance_refs)
@@ -119,6 +119,37 @@ def test_evaluate_and_decision_quality_on_exact_data():
     assert q["correct"] < 1.0 and q["lost_mean_pct"] > 0
 
 
+def test_loo_decisions_against_the_baselines_on_exact_data():
+    cal = synthetic_calibration(eps=0.0)  # Eq 7 and Eq 8 hold exactly: the paper's estimator is exact
+    R = np.logspace(3, 10, 15)
+    d = loo_decisions(cal, HapalaEstimator, R=R, eps=0.0)
+    assert len(d) == len(cal) * len(R)
+    # every held-out R_est is the true R_C
+    np.testing.assert_allclose(d["R_est"], d["R_C"], rtol=1e-9)
+    sc = policy_scores(d).set_index("policy")
+    assert sc.loc["selector", "correct_pct"] == 100.0 and sc.loc["selector", "lost_max_pct"] == pytest.approx(0, abs=1e-9)
+    assert sc.loc["oracle", "correct_pct"] == 100.0
+    # below R_C the grid wins and above it the hierarchy: each fixed answer is right only on its side
+    grid_side = (d["R"] <= d["R_C"]).mean()
+    assert sc.loc["always grid", "correct_pct"] == pytest.approx(100 * grid_side)
+    assert sc.loc["always hierarchy", "correct_pct"] == pytest.approx(100 * (1 - grid_side))
+    assert 0 < grid_side < 1 and sc.loc["always grid", "lost_max_pct"] > 50
+
+
+def test_step5_diagnosis_names_the_slow_outlier():
+    cal = synthetic_calibration(eps=0.0)
+    typical = step5_diagnosis(cal, HapalaEstimator, eps=0.0)
+    assert typical["median_tG_over_tH"] == pytest.approx(np.median(cal.t_RG / cal.t_RH))
+    assert typical["hier_slower_share"] == 0.0 and typical["eq8_k_mean"] == pytest.approx(5e-8)
+    # one scene where the hierarchy is 20x slower than the grid (a long skinny cylinder): Eq 8's mean
+    # constant rises far above its median and step 5 fires for the typical scenes
+    slow = cal.copy()
+    slow.loc[len(slow)] = {**slow.iloc[2].to_dict(), "scene": "slow", "t_RH": 20 * slow.iloc[2]["t_RG"]}
+    d = step5_diagnosis(slow, HapalaEstimator, eps=0.0)
+    assert d["eq8_k_mean"] > 3 * d["eq8_k_median"] and d["step5_share"] > 0.8
+    assert typical["step5_share"] == 0.0
+
+
 # ---------------------------------------------------------------- Havran statistics
 def test_havran_statistics_hand_computed_counts():
     c = np.array([0, 0, 1, 2, 3, 4, 0, 6])             # a 2x2x2 grid's per-cell counts
@@ -214,5 +245,5 @@ def test_selector_cli_json(run_cli, tmp_path):
     assert len(lines) == 1, proc.stdout
     out = json.loads(lines[0])
     assert {"choice", "rc_est", "t_grid", "t_hier", "t_build_hier"} <= set(out)
-    assert out["choice"] in ("grid", "kdtree") and out["t_grid"] > 0 and out["t_build_hier"] > 0
+    assert out["choice"] in ("grid", "bvh4") and out["t_grid"] > 0 and out["t_build_hier"] > 0
     assert out["rc_est"] is None or out["rc_est"] > 0

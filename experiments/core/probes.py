@@ -18,11 +18,17 @@ import numpy as np
 from costmodel.havran import havran_stats
 from costmodel.kdcost import (BVH_CALIBRATION, BVH_SETTINGS, DEFAULT_SETTINGS, BvhSahFit, KdCostFit, fit_bvh_trav_cost,
                               fit_sah_constants)
-from costmodel.select import DEFAULT_SAMPLE, TIME_STAT, time_stats
+from costmodel.select import DEFAULT_SAMPLE, TIME_STAT
 from tracer.accel import build
 from tracer.measure.timing import MIN_SAMPLE_SECONDS, build_clock, time_call, time_single_pass
 from tracer.scenes.rays import make_rays
 from tracer.scenes.scene import Scene, load_scene
+
+
+def time_stats(runs) -> dict:
+    """Median and minimum of repeated timings (interference only ever adds time: the minimum is the
+    less noisy estimate on a shared machine, the median the conventional one)."""
+    return {"median": float(np.median(runs)), "min": float(np.min(runs))}
 
 
 @contextmanager
