@@ -3,11 +3,18 @@ including the NaN rule (origin on a slab plane with an infinite inverse directio
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from numba import njit
 
 from tracer.accel.geometry import ray_triangle
-from tracer.accel.simd import slab4
+from tracer.accel.simd import ctz, popc, slab4, slab8
 from tracer.accel.simd_tri import ray_tri4
+
+
+@njit
+def _vec8(nf, base, offs, o, j, tlo, thi, tol, t8):
+    return slab8(nf, base, offs[0], offs[1], offs[2], offs[3], offs[4], offs[5], o[0], o[1], o[2], j[0], j[1],
+                 j[2], tlo, thi, tol, t8)
 
 
 @njit
@@ -16,12 +23,12 @@ def _vec(nf, base, offs, o, j, tlo, thi, tol, t4):
                  j[2], tlo, thi, tol, t4)
 
 
-def _scalar(nf, base, offs, o, j, tlo, thi, tol):
+def _scalar(nf, base, offs, o, j, tlo, thi, tol, w=4):
     gt = lambda t, a: a if a > t else t  # noqa: E731
     lt = lambda t, a: a if a < t else t  # noqa: E731
     f = np.float32
-    mask, tn4 = 0, np.empty(4, np.float32)
-    for k in range(4):
+    mask, tn4 = 0, np.empty(w, np.float32)
+    for k in range(w):
         d = [f((nf[base + k + offs[i]] - o[i // 2]) * j[i // 2]) for i in range(6)]
         tn = gt(gt(gt(tlo, d[0]), d[2]), d[4])
         tf = lt(lt(lt(thi, d[1]), d[3]), d[5])
@@ -30,33 +37,44 @@ def _scalar(nf, base, offs, o, j, tlo, thi, tol):
     return mask, tn4
 
 
-def test_slab4_matches_the_scalar_code():
+@pytest.mark.parametrize("w", [4, 8])
+def test_slab_matches_the_scalar_code(w):
     rng = np.random.default_rng(0)
-    offs = np.array([0, 12, 4, 16, 8, 20], np.uint64)  # near x, far x, near y, far y, near z, far z
+    offs = np.array([0, 3 * w, w, 4 * w, 2 * w, 5 * w], np.uint64)  # near x, far x, near y, far y, near z, far z
     seen = set()
     for trial in range(3000):
-        lo = rng.uniform(-1, 1, (3, 4)).astype(np.float32)
+        lo = rng.uniform(-1, 1, (3, w)).astype(np.float32)
         if trial % 7 == 0:  # four copies of one box around the origin: all four met
             lo[:] = np.float32(-2.5)
-        hi = (lo + rng.uniform(0.5, 2.5, (3, 4)) + (5 if trial % 7 == 0 else 0)).astype(np.float32)
+        hi = (lo + rng.uniform(0.5, 2.5, (3, w)) + (5 if trial % 7 == 0 else 0)).astype(np.float32)
         nf = np.concatenate([lo.ravel(), hi.ravel(), np.zeros(8, np.float32)])
         o = rng.uniform(-2, 2, 3).astype(np.float32)
         d = rng.normal(size=3)
         if trial % 5 == 0:  # a ray parallel to a slab, its origin on one of the planes: inf * 0 = NaN
             ax = trial % 3
             d[ax] = 0.0
-            o[ax] = lo[ax, trial % 4]
+            o[ax] = lo[ax, trial % w]
         with np.errstate(divide="ignore"):
             j = (1.0 / d).astype(np.float32)
         tlo, thi, tol = np.float32(0.0), np.float32(rng.uniform(0.5, 5)), np.float32(1e-6)
-        t4 = np.empty(4, np.float32)
-        mask = _vec(nf, np.uint64(0), offs, o, j, tlo, thi, tol, t4)
+        t4 = np.empty(w, np.float32)
+        mask = (_vec if w == 4 else _vec8)(nf, np.uint64(0), offs, o, j, tlo, thi, tol, t4)
         with np.errstate(invalid="ignore"):
-            want_mask, want_t4 = _scalar(nf, 0, offs, o, j, tlo, thi, tol)
+            want_mask, want_t4 = _scalar(nf, 0, offs, o, j, tlo, thi, tol, w)
         assert mask == want_mask, trial
         np.testing.assert_array_equal(t4.view(np.int32), want_t4.view(np.int32))
         seen.add(mask)
-    assert 0 in seen and 15 in seen and len(seen) >= 10  # misses, all four hit, and mixed masks
+    assert 0 in seen and (1 << w) - 1 in seen and len(seen) >= 10  # misses, all hit, and mixed masks
+
+
+@njit
+def _bits(x):
+    return ctz(x), popc(x)
+
+
+def test_ctz_and_popc():
+    for x in (1, 2, 3, 8, 0b10110000, 0xFF, 1 << 40):
+        assert _bits(np.int64(x)) == ((x & -x).bit_length() - 1, bin(x).count("1"))
 
 
 @njit

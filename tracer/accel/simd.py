@@ -1,5 +1,6 @@
 """Four-lane float32 operations that Numba does not vectorise by itself, as LLVM vector IR
-(:func:`numba.extending.intrinsic`): the slab test of the four child boxes of a 4-wide BVH node.
+(:func:`numba.extending.intrinsic`): the slab test of the four (eight) child boxes of a 4-wide (8-wide)
+BVH node, and the bit counts of its hit mask.
 
 Numba compiles the four box tests of :func:`tracer.accel.bvh4.bvh4_chunk` written as a loop to 48 scalar
 subtractions and multiplications and 24 scalar min/max (``vsubss``/``vmulss``/``vmaxss``: LLVM's
@@ -16,13 +17,45 @@ from numba import types
 from numba.extending import intrinsic
 
 _F32 = ir.FloatType()
-_V4 = ir.VectorType(_F32, 4)
 _I32 = ir.IntType(32)
 
 
-def _splat(builder, x):
-    v = builder.insert_element(ir.Constant(_V4, ir.Undefined), x, _I32(0))
-    return builder.shuffle_vector(v, ir.Constant(_V4, ir.Undefined), ir.Constant(ir.VectorType(_I32, 4), [0, 0, 0, 0]))
+def _slab_codegen(width):
+    """Codegen of the ``width``-lane slab test (see :func:`slab4`)."""
+    vt = ir.VectorType(_F32, width)
+
+    def splat(builder, x):
+        v = builder.insert_element(ir.Constant(vt, ir.Undefined), x, _I32(0))
+        return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined), ir.Constant(ir.VectorType(_I32, width), [0] * width))
+
+    def codegen(context, builder, signature, args):
+        (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, aox, aoy, aoz, ajx, ajy, ajz, atlo, athi, atol,
+         at4) = args
+        ary = context.make_array(signature.args[0])(context, builder, anf)
+        out = context.make_array(signature.args[17])(context, builder, at4)
+        vptr = vt.as_pointer()
+
+        def planes(off):
+            p = builder.gep(ary.data, [builder.add(abase, off)])
+            return builder.load(builder.bitcast(p, vptr), align=4)
+
+        def dist(off, o, j):
+            return builder.fmul(builder.fsub(planes(off), splat(builder, o)), splat(builder, j))
+
+        def gt(t, a):  # a if a > t else t
+            return builder.select(builder.fcmp_ordered(">", a, t), a, t)
+
+        def lt(t, a):  # a if a < t else t
+            return builder.select(builder.fcmp_ordered("<", a, t), a, t)
+
+        tn = gt(gt(gt(splat(builder, atlo), dist(anxo, aox, ajx)), dist(anyo, aoy, ajy)), dist(anzo, aoz, ajz))
+        tf = lt(lt(lt(splat(builder, athi), dist(afxo, aox, ajx)), dist(afyo, aoy, ajy)), dist(afzo, aoz, ajz))
+        hit = builder.fcmp_ordered("<=", tn, builder.fadd(tf, splat(builder, atol)))
+        builder.store(tn, builder.bitcast(out.data, vptr), align=4)
+        bits = builder.bitcast(hit, ir.IntType(width))
+        return builder.zext(bits, ir.IntType(64))
+
+    return codegen
 
 
 @intrinsic
@@ -34,32 +67,34 @@ def slab4(typingctx, nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy,
     exit = min(thi, (far_x - ox) jx, …), each max/min ``select(a > t, a, t)`` in that order; hit =
     entry <= exit + tol. The four entries are stored into ``t4`` (float32[4])."""
     sig = types.int64(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t4)
+    return sig, _slab_codegen(4)
+
+
+@intrinsic
+def slab8(typingctx, nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t8):
+    """:func:`slab4` on eight boxes (``<8 x float>``, one AVX2 register): planes ``nf[base + off + 0..7]``,
+    entries into ``t8`` (float32[8]), an 8-bit mask."""
+    sig = types.int64(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t8)
+    return sig, _slab_codegen(8)
+
+
+@intrinsic
+def ctz(typingctx, x):
+    """Index of the lowest set bit of the int64 ``x`` (``x`` != 0): LLVM's ``cttz`` (one ``tzcnt``)."""
+    sig = types.int64(types.int64)
 
     def codegen(context, builder, signature, args):
-        (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, aox, aoy, aoz, ajx, ajy, ajz, atlo, athi, atol,
-         at4) = args
-        ary = context.make_array(signature.args[0])(context, builder, anf)
-        out = context.make_array(signature.args[17])(context, builder, at4)
-        vptr = _V4.as_pointer()
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
 
-        def planes(off):
-            p = builder.gep(ary.data, [builder.add(abase, off)])
-            return builder.load(builder.bitcast(p, vptr), align=4)
+    return sig, codegen
 
-        def dist(off, o, j):
-            return builder.fmul(builder.fsub(planes(off), _splat(builder, o)), _splat(builder, j))
 
-        def gt(t, a):  # a if a > t else t
-            return builder.select(builder.fcmp_ordered(">", a, t), a, t)
+@intrinsic
+def popc(typingctx, x):
+    """Set bits of the int64 ``x``: LLVM's ``ctpop`` (one ``popcnt``)."""
+    sig = types.int64(types.int64)
 
-        def lt(t, a):  # a if a < t else t
-            return builder.select(builder.fcmp_ordered("<", a, t), a, t)
-
-        tn = gt(gt(gt(_splat(builder, atlo), dist(anxo, aox, ajx)), dist(anyo, aoy, ajy)), dist(anzo, aoz, ajz))
-        tf = lt(lt(lt(_splat(builder, athi), dist(afxo, aox, ajx)), dist(afyo, aoy, ajy)), dist(afzo, aoz, ajz))
-        hit = builder.fcmp_ordered("<=", tn, builder.fadd(tf, _splat(builder, atol)))
-        builder.store(tn, builder.bitcast(out.data, vptr), align=4)
-        bits = builder.bitcast(hit, ir.IntType(4))
-        return builder.zext(bits, ir.IntType(64))
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(args[0])
 
     return sig, codegen
