@@ -177,8 +177,17 @@ class CounterCostFit:
         return X @ coef
 
 
+#: an exponent's CI is reported only from this many distinct scenes spanning this many decades of N: a
+#: bootstrap over 3-4 points resamples the same few scenes and gives intervals of zero width
+EXPONENT_MIN_SCENES = 6
+EXPONENT_MIN_DECADES = 2.0
+
+
 class ExponentFit:
-    """y ∝ x^alpha by least squares on logs; bootstrap 95 % CI of alpha."""
+    """y ∝ x^alpha by least squares on logs; bootstrap 95 % CI of alpha. ``determined_`` is False
+    (and every report prints "not determined" instead of the CI) when the points are fewer than
+    :data:`EXPONENT_MIN_SCENES` distinct x, span less than :data:`EXPONENT_MIN_DECADES` decades, or
+    the bootstrap interval is degenerate (not finite or of zero width)."""
 
     def __init__(self, n_boot: int = 2000, seed: int = 0):
         self.n_boot, self.seed = n_boot, seed
@@ -198,7 +207,18 @@ class ExponentFit:
         dof = max(len(lx) - 2, 1)
         se = np.sqrt((resid**2).sum() / dof / max(((lx - lx.mean()) ** 2).sum(), 1e-300))
         self.se_ = float(se)
+        self.n_points_ = int(len(np.unique(lx)))
+        self.decades_ = float(np.ptp(lx) / np.log(10.0)) if len(lx) else 0.0
+        lo, hi = self.ci_
+        self.determined_ = bool(self.n_points_ >= EXPONENT_MIN_SCENES and self.decades_ >= EXPONENT_MIN_DECADES
+                                and np.isfinite(lo) and np.isfinite(hi) and hi - lo > 1e-6)
         return self
+
+    def ci_text(self, fmt: str = "{:.2f}") -> str:
+        """The CI as printed: "lo–hi", or why it is not determined."""
+        if self.determined_:
+            return f"{fmt.format(self.ci_[0])}–{fmt.format(self.ci_[1])}"
+        return f"not determined ({self.n_points_} scenes over {self.decades_:.1f} decades of N)"
 
     def predict(self, x):
         return np.exp(self.log_c_) * np.asarray(x, float) ** self.alpha_

@@ -148,3 +148,17 @@ def test_pooling_evidence_detects_per_scene_constants():
     assert ev["per_scene"], ev
     assert ev["fits"]["a"].ts_ == pytest.approx(3.0, rel=0.1)
     assert ev["fits"]["b"].ts_ == pytest.approx(9.0, rel=0.1)
+
+
+def test_exponent_ci_needs_six_scenes_over_two_decades():
+    rng = np.random.default_rng(3)
+    few = np.array([1e3, 4e3, 1.6e4, 6.4e4])
+    f = ExponentFit().fit(few, few ** 0.8 * np.exp(rng.normal(0, 0.05, few.size)))
+    assert not f.determined_ and f.n_points_ == 4
+    assert f.ci_text() == "not determined (4 scenes over 1.8 decades of N)"
+    many = np.geomspace(1e2, 1e5, 7)
+    g = ExponentFit().fit(many, many ** 0.8 * np.exp(rng.normal(0, 0.05, many.size)))
+    assert g.determined_ and g.ci_[0] < 0.8 < g.ci_[1] and g.ci_[1] - g.ci_[0] < 0.2
+    assert g.ci_text() == f"{g.ci_[0]:.2f}–{g.ci_[1]:.2f}"
+    narrow = np.geomspace(1e3, 5e4, 8)  # enough scenes, 1.7 decades: still not determined
+    assert not ExponentFit().fit(narrow, narrow ** 0.8).determined_

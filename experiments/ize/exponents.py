@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from costmodel.derive import two_level_M1
-from costmodel.fit import ExponentFit, refine_minimum, work_cost
+from costmodel.fit import EXPONENT_MIN_DECADES, EXPONENT_MIN_SCENES, ExponentFit, refine_minimum, work_cost
 from experiments.core.store import atomic_write
 from experiments.core.sweep import FULL_FACTORS, QUICK_FACTORS, cells_sweep, grid_cells, sweep
 from tracer.scenes.rays import make_rays
@@ -71,8 +71,14 @@ def two_level_row(names, n_rays, seed) -> dict:
     nan = float("nan")
     return {"family": "surfpoints (two-level M1)", "kind": "two-level", "scenes": ",".join(names), "N": Ns,
             "M_best": [nan] * len(Ns), "M_best_work": Mw, "alpha_work": w.alpha_, "work_ci_lo": w.ci_[0],
-            "work_ci_hi": w.ci_[1], "alpha": nan, "ci_lo": nan, "ci_hi": nan, "se": nan, "theory": 0.6,
-            "paper_empirical": None, "theory_in_ci": bool(w.ci_[0] <= 0.6 <= w.ci_[1]), "rays": n_rays}
+            "work_ci_hi": w.ci_[1], "work_ci": w.ci_text(), "work_determined": w.determined_,
+            "alpha": nan, "ci_lo": nan, "ci_hi": nan, "ci": "–", "determined": False, "se": nan, "theory": 0.6,
+            "paper_empirical": None, "theory_in_ci": _theory_in(w, 0.6), "rays": n_rays}
+
+
+def _theory_in(fit, theory):
+    """Whether the theory's exponent lies in the fit's CI; None when the CI is not determined."""
+    return bool(fit.ci_[0] <= theory <= fit.ci_[1]) if fit.determined_ else None
 
 
 def add_arguments(p) -> None:
@@ -126,9 +132,10 @@ def main(ctx, args) -> int:
         wfit = ExponentFit().fit(Ns, Mw)
         rows.append({"family": fam, "kind": kind, "scenes": ",".join(names), "N": Ns, "M_best": Ms,
                      "M_best_work": Mw, "alpha_work": wfit.alpha_, "work_ci_lo": wfit.ci_[0], "work_ci_hi": wfit.ci_[1],
-                     "alpha": fit.alpha_, "ci_lo": fit.ci_[0], "ci_hi": fit.ci_[1], "se": fit.se_,
-                     "theory": theory, "paper_empirical": paper_emp,
-                     "theory_in_ci": bool(fit.ci_[0] <= theory <= fit.ci_[1]), "rays": n_rays})
+                     "work_ci": wfit.ci_text(), "work_determined": wfit.determined_,
+                     "alpha": fit.alpha_, "ci_lo": fit.ci_[0], "ci_hi": fit.ci_[1], "ci": fit.ci_text(),
+                     "determined": fit.determined_, "se": fit.se_, "theory": theory, "paper_empirical": paper_emp,
+                     "theory_in_ci": _theory_in(fit, theory), "rays": n_rays})
     if not wanted or any("surfpoints".startswith(w) or w.startswith("two") for w in wanted):
         rows.append(two_level_row(TWO_LEVEL_FAMILY[:4] if args.quick else TWO_LEVEL_FAMILY,
                                   args.rays or 10_000, args.seed))
@@ -151,8 +158,10 @@ def main(ctx, args) -> int:
 def _summary(tab) -> str:
     lines = ["# Exponents: best one-level grid M ∝ N^alpha (and two-level M1 ∝ N^alpha)", "",
              "Best M per scene = swept minimum (M from N/8 to 64N, or up to 32 N^1.5 for skinny), refined by a "
-             "parabola in log M and measured; alpha from a log-log fit, 95 % CI by bootstrap over scenes "
-             "(few scenes per family: the CI is wide and says so).", "",
+             "parabola in log M and measured; alpha from a log-log fit, 95 % CI by bootstrap over scenes, "
+             f"printed only for a family of at least {EXPONENT_MIN_SCENES} scenes spanning {EXPONENT_MIN_DECADES:g} "
+             "decades of N with a non-degenerate interval; otherwise 'not determined' (a bootstrap over 3-4 scenes "
+             "resamples the same few points and gives intervals of zero width).", "",
              "Two measures of 'best': the timed runtime (this machine) and the work model steps + 4·tests from "
              "the tracer's counters (Ti/Ts = 4 as the paper; deterministic, no timing noise) — the second tests the "
              "theory's counting argument alone, the first adds what the machine does to it. The two-level row "
@@ -164,11 +173,12 @@ def _summary(tab) -> str:
         emp = "–" if r.paper_empirical is None or (isinstance(r.paper_empirical, float) and np.isnan(r.paper_empirical)) \
             else f"{r.paper_empirical:.3f}"
         timed = "–" if np.isnan(r.alpha) else ", ".join(f"{int(m):,}" for m in r.M_best)
-        atimed = "–" if np.isnan(r.alpha) else f"{r.alpha:.2f} ({r.ci_lo:.2f}–{r.ci_hi:.2f})"
+        atimed = "–" if np.isnan(r.alpha) else f"{r.alpha:.2f} ({r.ci})"
+        inside = "not determined" if r.theory_in_ci is None else ("yes" if r.theory_in_ci else "no")
         lines.append(f"| {r.family} | {', '.join(f'{n:,}' for n in r.N)} | {timed} | "
                      f"{atimed} | {', '.join(f'{int(m):,}' for m in r.M_best_work)} | "
-                     f"{r.alpha_work:.2f} ({r.work_ci_lo:.2f}–{r.work_ci_hi:.2f}) | {r.theory:g} | {emp} | "
-                     f"{'yes' if r.theory_in_ci else 'no'}{' (work CI)' if np.isnan(r.alpha) else ''} |")
+                     f"{r.alpha_work:.2f} ({r.work_ci}) | {r.theory:g} | {emp} | "
+                     f"{inside}{' (work CI)' if np.isnan(r.alpha) else ''} |")
     lines += ["", "Where the CI excludes the theory, our scenes and machine differ from the theory's assumptions "
               "(points and lines, rays that never hit, maths-bound costs): real triangles are hit and stop rays, and "
               "at large M the cell arrays leave the caches, so steps get dearer and the best M shrinks."]

@@ -171,8 +171,10 @@ def ize_rows(out: Path) -> list[dict]:
         for _, f in e.iterrows():
             if any(w in f.family for w in ("scattered", "stadium")):
                 continue  # the paper's exponents are for manifold-like models
+            det = bool(f.get("work_determined", True))  # a CI from too few scenes is no interval
             rows.append(row(P, "Sec 5", f"empirical exponent of the best M, {f.family}", c, float(f.alpha_work),
-                            float(f.work_ci_lo), float(f.work_ci_hi), target="exponents"))
+                            float(f.work_ci_lo) if det else None, float(f.work_ci_hi) if det else None,
+                            target="exponents"))
     return rows
 
 
