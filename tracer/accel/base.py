@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from tracer.errors import GridcostError
+from tracer.measure.footprint import check_structure
 
 #: per-ray counter columns, in the order of the int32 array the kernels fill (``_jit.store_ray``).
 #: One meaning per column; a structure declares the columns it fills in ``counter_fields`` (name ->
@@ -48,6 +49,7 @@ STRUCTURES = {
     "kdtree": "tracer.accel.kdtree:KdTree",
     "bvh": "tracer.accel.bvh:BVH",
     "bvh4": "tracer.accel.bvh4:BVH4",
+    "wbvh": "tracer.accel.wide_bvh:WideBVH",
     "cgt": "tracer.accel.packet:CoherentGrid",
     "sortedlists": "tracer.accel.sortedlists:SortedLists",
 }
@@ -204,4 +206,5 @@ def build(scene, name: str = "grid", **params) -> Accel:
         inst = cls(**params)
     except TypeError as exc:  # an unknown or missing parameter is the caller's input error
         raise GridcostError(f"structure {name!r}: bad parameters {params!r} ({exc})") from None
+    check_structure(name, inst, scene)  # refuse over the memory budget before allocating anything big
     return inst.build(scene)
