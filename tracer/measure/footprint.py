@@ -1,0 +1,212 @@
+"""Peak memory of a structure's build, estimated before anything is allocated.
+
+:func:`check_structure` is called by :func:`tracer.accel.base.build` for every structure, just
+before ``inst.build(scene)``: the estimate of :func:`estimate` against :func:`memory_budget`, one
+:class:`GridcostError` line when over. Structures need no edit; a registered (plug-in) structure may
+declare ``estimate_bytes(scene) -> int`` (a method or classmethod of its :class:`Accel` subclass),
+else it gets the conservative :data:`GENERIC_BYTES_PER_TRI`.
+
+Each estimate is an inventory of the arrays the build holds at its peak:
+
+* grids (``grid``, ``cgt``, each level of ``nested``): bytes per cell and per triangle reference,
+  the references predicted from the geometry (:func:`expected_refs`: the mean number of cells of
+  size h that a triangle overlaps in a grid laid at random over it is the volume of the triangle
+  swept by an h-cube, sum(projected areas) / h^2 + sum(extents) / h + 1, exact in expectation for
+  flat convex pieces);
+* hierarchies (``bvh``, ``bvh4``, ``sortedlists``, ``kdtree``): node counts are bounded by the
+  faces (a BVH leaf holds >= 1 triangle, the sorted lists' slots are N + nodes), so their peak is
+  bytes per triangle; the kd-tree's sorted-edge work area (3 axes x 8N x 8 B) and its reference
+  duplication (1-19 references per triangle on the meshes measured) are folded into one figure.
+
+The per-triangle figures are tracemalloc peaks of the builds (numpy and Numba allocations are both
+traced) over bunny-948, bunny-69k, sphere-100k and particles-50k; tests/test_memory_guards.py keeps
+every estimate within 1.5x of the measured peak.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from tracer.errors import GridcostError
+from tracer.measure.memory import cache_bytes, fmt_bytes, memory_budget
+
+#: bytes per cell (int32 start + occupancy bit) and per reference (int32 id + 9 float32 vertices in
+#: cell order) of a grid build; macrocells add an int32 diff and two bool masks per cell
+GRID_BYTES_PER_CELL = 4 + 1 / 8
+GRID_BYTES_PER_REF_ID = 4
+TRI_ROW_BYTES = 9 * 4
+GRID_MACRO_BYTES_PER_CELL = 4 + 1 + 1
+#: one nested level's peak per cell and per reference (the counts of tracer.accel.nested's own guard)
+NESTED_BYTES_PER_CELL = 44
+NESTED_BYTES_PER_REF = 82
+#: the bytes a nested grid keeps per cell (int32 pair) and per leaf reference (id)
+NESTED_KEPT_PER_CELL = 8
+NESTED_KEPT_PER_REF = 4
+#: tracemalloc peak per triangle of the hierarchies' builds (see the module docstring):
+#: measured 279-288 (bvh), 367-420 (bvh4), 264-267 (sortedlists), 333-1653 (kdtree: particles to
+#: bunny-948, reference duplication), 220-428 (kdtree clip=True)
+BVH_BYTES_PER_TRI = 285
+BVH4_BYTES_PER_TRI = 395
+SORTEDLISTS_BYTES_PER_TRI = 266
+KDTREE_BYTES_PER_TRI = 1250
+KDTREE_CLIP_BYTES_PER_TRI = 300
+#: a structure nothing is known of: the largest per-triangle figure above, doubled
+GENERIC_BYTES_PER_TRI = 2 * KDTREE_BYTES_PER_TRI
+#: fixed bytes of any build (small arrays, stacks)
+BUILD_OVERHEAD = 64 << 10
+#: triangles per block of the geometry pass (its float64 temporaries stay near 4 MB)
+CHUNK = 1 << 14
+#: triangles the nested model follows level by level (a regular sample of larger scenes)
+NESTED_SAMPLE = 1 << 16
+
+
+def _geometry(tris: np.ndarray, lo: np.ndarray, cell: np.ndarray):
+    """Per triangle, in cell units: the sum of its areas projected on the three axis planes, the sum
+    of its extents along the axes, and its centroid (computed in blocks of :data:`CHUNK`)."""
+    n = len(tris)
+    area, ext, cen = np.empty(n), np.empty(n), np.empty((n, 3))
+    for s in range(0, n, CHUNK):
+        t = (tris[s:s + CHUNK].astype(np.float64) - lo) / cell
+        e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        area[s:s + CHUNK] = 0.5 * np.abs(np.cross(e1, e2)).sum(axis=1)
+        ext[s:s + CHUNK] = (t.max(axis=1) - t.min(axis=1)).sum(axis=1)
+        cen[s:s + CHUNK] = t.mean(axis=1)
+    return area, ext, cen
+
+
+def expected_refs(scene, res, exact: bool = True) -> float:
+    """Triangle references of a grid of ``res`` cells over the scene's bounds: with ``exact``
+    (triangle/box overlap) the swept-cube volume of each triangle (module docstring), else the
+    cells of its bounding box; counted in blocks of :data:`CHUNK` triangles."""
+    lo = np.asarray(scene.bounds[0], np.float64)
+    res = np.asarray(res, np.float64)
+    cell = np.maximum(np.asarray(scene.bounds[1], np.float64) - lo, 1e-30) / res
+    total = 0.0
+    for s in range(0, scene.n, CHUNK):
+        tris = scene.tris[s:s + CHUNK]
+        if exact:
+            t = (tris.astype(np.float64) - lo) / cell
+            area = 0.5 * np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum(axis=1)
+            total += float((area + (t.max(axis=1) - t.min(axis=1)).sum(axis=1) + 1.0).sum())
+        else:
+            t = (tris.astype(np.float64) - lo) / cell
+            a = np.clip(np.floor(t.min(axis=1)), 0, res - 1)
+            b = np.clip(np.floor(t.max(axis=1)), 0, res - 1)
+            total += float(np.prod(b - a + 1, axis=1).sum())
+    return total
+
+
+def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: int = 0) -> int:
+    """Peak of a one-level grid build (the same inventory as tracer.accel.grid.grid_build_bytes)."""
+    rows = refs if layout == "copy" else n
+    b = ncell * GRID_BYTES_PER_CELL + refs * GRID_BYTES_PER_REF_ID + rows * TRI_ROW_BYTES
+    if macro:
+        b += ncell * GRID_MACRO_BYTES_PER_CELL
+    return int(b)
+
+
+def _layout(layout: str, n: int, refs: float) -> str:
+    if layout != "auto":
+        return layout
+    return "index" if n * TRI_ROW_BYTES <= cache_bytes(2) < refs * TRI_ROW_BYTES else "copy"
+
+
+def _wald_res(scene, lam: float) -> np.ndarray:
+    ext = np.maximum(np.asarray(scene.bounds[1], float) - np.asarray(scene.bounds[0], float), 1e-30)
+    k = (lam * scene.n / float(np.prod(ext))) ** (1.0 / 3.0)
+    return np.maximum(1, np.round(ext * k)).astype(np.int64)
+
+
+def _grid(inst, scene) -> int:
+    res = inst._resolution(scene)
+    refs = expected_refs(scene, res, bool(inst.exact))
+    return grid_bytes(float(np.prod(res)), refs, scene.n, _layout(inst.layout, scene.n, refs), inst.macro)
+
+
+def _cgt(inst, scene) -> int:
+    res = np.asarray(inst.res, np.int64) if getattr(inst, "res", None) is not None else _wald_res(scene, inst.lam)
+    refs = expected_refs(scene, res, bool(getattr(inst, "exact", True)))
+    return grid_bytes(float(np.prod(res)), refs, scene.n, "copy", inst.macro)
+
+
+def _nested(inst, scene) -> int:
+    """Level by level (Ize's compact nesting: a sub-grid spans one parent cell): a triangle's cell
+    holds about ``k`` references (the triangles whose centroid shares the top cell, scaled by the
+    level's references per triangle); the sub-grid over that cell has ``_sub_cells(k)`` cells of
+    side h / cells^(1/3); the triangle's references there are its swept-cube volume at that side,
+    plus one per piece the level above cut it into. Below level 2 a cell's references spread over
+    the sub-cells a surface crosses (1.5 cells^(2/3) of them). Over :data:`NESTED_SAMPLE` triangles, a
+    regular sample of them stands for the whole (sums scaled)."""
+    levels = int(inst.levels)
+    n = scene.n
+    m1 = inst._m1_cells(n, inst._check())
+    lo = np.asarray(scene.bounds[0], np.float64)
+    ext = np.maximum(np.asarray(scene.bounds[1], np.float64) - lo, 1e-30)
+    res1 = np.maximum(1, np.round(ext / (float(np.prod(ext)) / max(m1, 1.0)) ** (1.0 / 3.0))).astype(np.int64)
+    step = max(1, -(-n // NESTED_SAMPLE))
+    area, sext, cen = _geometry(scene.tris[::step], lo, ext / res1)  # in top-grid cell units
+    scale = n / max(len(area), 1)
+    pieces = area + sext + 1.0
+    cid = np.ravel_multi_index(tuple(np.clip(cen.T.astype(np.int64), 0, res1[:, None] - 1)), tuple(res1))
+    cells_l, refs_l = float(np.prod(res1)), float(pieces.sum()) * scale
+    cnt = np.bincount(cid)[cid] * scale * (refs_l / max(n, 1))
+    h = np.ones(len(area))
+    alive = np.ones(len(area), bool)
+    peak = kept = 0.0
+    for level in range(1, levels + 1):
+        peak = max(peak, kept + cells_l * NESTED_BYTES_PER_CELL + refs_l * NESTED_BYTES_PER_REF)
+        kept += cells_l * NESTED_KEPT_PER_CELL + refs_l * NESTED_KEPT_PER_REF
+        if level == levels:
+            break
+        alive &= cnt > inst.leaf_threshold
+        if not alive.any():
+            break
+        sub = np.maximum(inst._sub_cells(cnt, level + 1) * float(inst.m2_scale) ** 3, 1.0)
+        # each nested cell's sub-grid once: a triangle holds pieces/cnt of its cell
+        cells_l = float((pieces * sub / np.maximum(cnt, 1e-30))[alive].sum()) * scale
+        h = h / np.cbrt(sub)
+        new = np.where(alive, area / h**2 + sext / h + pieces, 0.0)
+        refs_l = float(new.sum()) * scale
+        cnt = np.where(alive, cnt * (new / np.maximum(pieces, 1e-30)) / np.minimum(sub, 1.5 * sub ** (2.0 / 3.0)), 0.0)
+        pieces = new
+    # the leaf rows gathered at the end, beside what the levels keep
+    return int(max(peak, kept + refs_l * TRI_ROW_BYTES))
+
+
+#: structure name -> estimate(inst, scene) of its build's peak bytes (beside BUILD_OVERHEAD)
+_PER_TRI = {"bvh": BVH_BYTES_PER_TRI, "bvh4": BVH4_BYTES_PER_TRI, "sortedlists": SORTEDLISTS_BYTES_PER_TRI}
+ESTIMATES = {
+    "grid": _grid,
+    "cgt": _cgt,
+    "nested": _nested,
+    "kdtree": lambda inst, scene: scene.n * (KDTREE_CLIP_BYTES_PER_TRI if inst.clip else KDTREE_BYTES_PER_TRI),
+    **{k: (lambda v: lambda inst, scene: scene.n * v)(v) for k, v in _PER_TRI.items()},
+}
+
+
+def estimate(name: str, inst, scene) -> tuple[int, str]:
+    """(peak bytes, how it was estimated) of building ``inst`` (structure ``name``) over ``scene``."""
+    if name in ESTIMATES:
+        return int(ESTIMATES[name](inst, scene)) + BUILD_OVERHEAD, "model"
+    declared = getattr(inst, "estimate_bytes", None)
+    if callable(declared):
+        return int(declared(scene)), "declared"
+    return scene.n * GENERIC_BYTES_PER_TRI + BUILD_OVERHEAD, f"generic {GENERIC_BYTES_PER_TRI} B per triangle"
+
+
+def refusal(name: str, n: int, est: int, budget: int, how: str = "model") -> str:
+    """The one line of a refused build."""
+    return (f"structure {name!r} over {n:,} faces would need about {fmt_bytes(est)} ({how} estimate), over the "
+            f"memory budget of {fmt_bytes(budget)}; raise it with GRIDCOST_MEMORY_BUDGET (e.g. "
+            f"GRIDCOST_MEMORY_BUDGET={max(1, math.ceil(est / 2**30))}G) or use a smaller scene")
+
+
+def check_structure(name: str, inst, scene, budget: int | None = None) -> int:
+    """Refuse (GridcostError) to build ``inst`` over ``scene`` when its estimate exceeds the budget;
+    returns the estimate."""
+    budget = memory_budget() if budget is None else budget
+    est, how = estimate(name, inst, scene)
+    if est > budget:
+        raise GridcostError(refusal(name, scene.n, est, budget, how))
+    return est
