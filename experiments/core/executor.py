@@ -141,6 +141,18 @@ class LocalExecutor:
         return fn(*args), None, host()
 
 
+#: times a point is sent again after the worker measuring it was lost (beside the scheduler's own
+#: ``distributed.scheduler.allowed-failures``, which reschedules a task whose worker died)
+LOST_RETRIES = 2
+
+
+def _lost_worker_errors() -> tuple[type, ...]:
+    """What a future raises when its worker, not its task, failed."""
+    from distributed import KilledWorker
+    from distributed.comm.core import CommClosedError
+    return (KilledWorker, CommClosedError)
+
+
 class DaskExecutor:
     """Send tasks to a dask.distributed cluster at ``address`` (or a LocalCluster of worker
     processes for ``address='local'``). Results are yielded as they complete.
@@ -152,10 +164,10 @@ class DaskExecutor:
 
     name = "dask"
 
-    def __init__(self, address: str, ctx=None, tls=None, insecure: bool = False):
+    def __init__(self, address: str, ctx=None, tls=None, insecure: bool = False, retries: int = LOST_RETRIES):
         """``tls``: a certificate folder (:mod:`experiments.core.tls`): mutual TLS with the scheduler
         (required for a scheduler beyond loopback unless ``insecure``); with ``address='local'`` the
-        local cluster uses it too."""
+        local cluster uses it too. ``retries``: times a point lost with its worker is sent again."""
         try:
             from dask.distributed import Client, LocalCluster
         except ImportError:
@@ -163,6 +175,7 @@ class DaskExecutor:
             raise GridcostError("Dask is not installed: pip install 'gridcost[dask]'") from None
         from experiments.core import tls as tls_mod
         self.ctx = ctx
+        self.retries = int(retries)
         sec = tls_mod.security(tls) if tls is not None else None
         if address == "local":
             kw = {"security": sec, "protocol": "tls://"} if sec is not None else {}
@@ -175,13 +188,40 @@ class DaskExecutor:
             self.client = Client(address, security=sec, timeout=30) if sec is not None else Client(address, timeout=30)
 
     def map(self, specs: Iterable[dict], scenes: dict | None = None) -> Iterator[tuple[dict, list[dict]]]:
+        """Points as they complete (the sweep stores each at once, so an interrupted sweep keeps
+        them). A point whose worker was lost (the process killed, the connection closed, or Dask's
+        KilledWorker after the scheduler's own allowed failures) is sent again, up to ``retries``
+        times; points still lost after that are named in one GridcostError once every other point
+        has been yielded, and a rerun measures only them."""
         from dask.distributed import as_completed
         settings = self._settings()
-        futures = [self.client.submit(run_point, dict(s, settings=settings), pure=False) for s in specs]
-        for fut in as_completed(futures):
-            spec, rows = fut.result()
+        pending = {}
+
+        def send(s, tries):
+            fut = self.client.submit(run_point, dict(s, settings=settings), pure=False)
+            pending[fut] = (s, tries)
+            return fut
+
+        done = as_completed([send(s, 0) for s in specs])
+        lost = []
+        for fut in done:
+            s, tries = pending.pop(fut)
+            try:
+                spec, rows = fut.result()
+            except _lost_worker_errors() as exc:
+                if tries < self.retries:
+                    done.add(send(s, tries + 1))
+                else:
+                    lost.append(f"{s['scene']} {s['structure']} {s['params']} ({type(exc).__name__})")
+                continue
+            finally:
+                fut.release()
             spec.pop("settings", None)
             yield spec, rows
+        if lost:
+            from tracer.errors import GridcostError
+            raise GridcostError(f"{len(lost)} point(s) lost with their Dask worker after {self.retries + 1} tries: "
+                                f"{'; '.join(lost)}; the other points are stored, run again to measure these")
 
     @staticmethod
     def _settings() -> dict:
