@@ -1,9 +1,12 @@
-"""mkdocs hook: the table of targets on targets.md comes from ``experiments.run.TARGETS`` (the CLI's
-own table), so the page cannot fall behind the CLI. A target with no section of its own on the page,
-or a section for a target the CLI no longer has, is a warning, which ``mkdocs build --strict`` turns
-into a failed build. Loaded by mkdocs.yml (``hooks``), never by gridcost."""
+"""mkdocs hook: the tables that restate the code are generated from it, so the pages cannot fall
+behind. On targets.md the table of targets comes from ``experiments.run.TARGETS`` (the CLI's own
+table); a target with no section of its own on the page, or a section for a target the CLI no longer
+has, is a warning, which ``mkdocs build --strict`` turns into a failed build. On structures.md the
+counter schema comes from ``tracer.accel.base.COUNTER_SCHEMA`` (read from the source: the hook
+imports no Numba). Loaded by mkdocs.yml (``hooks``), never by gridcost."""
 from __future__ import annotations
 
+import ast
 import logging
 import re
 import sys
@@ -13,6 +16,8 @@ log = logging.getLogger("mkdocs.hooks.targets")
 
 #: where the generated table goes on targets.md
 MARKER = "<!-- targets-table -->"
+#: where the counter schema goes on structures.md
+COUNTERS_MARKER = "<!-- counter-schema -->"
 #: a target's own section: a level-3 heading holding its name in backticks
 SECTION = re.compile(r"^###\s+`([a-z0-9-]+)`", re.M)
 
@@ -38,7 +43,24 @@ def target_table(targets: dict, all_order: list) -> str:
     return "\n".join(rows)
 
 
+def counter_table(base: Path) -> str:
+    """Markdown: the counter columns of ``COUNTER_SCHEMA`` in ``base`` (tracer/accel/base.py), in order."""
+    for node in ast.parse(base.read_text()).body:
+        target = getattr(node, "target", None) or (node.targets[0] if isinstance(node, ast.Assign) else None)
+        if isinstance(target, ast.Name) and target.id == "COUNTER_SCHEMA":
+            schema = ast.literal_eval(node.value)
+            return "\n".join(["| column | counter | what it counts |", "|---|---|---|"]
+                             + [f"| {i} | `{k}` | {_cell(v)} |" for i, k in enumerate(schema) for v in [schema[k]]])
+    raise RuntimeError(f"no COUNTER_SCHEMA in {base}")
+
+
 def on_page_markdown(markdown: str, page, **kwargs) -> str:
+    if page.file.src_uri == "structures.md":
+        if COUNTERS_MARKER not in markdown:
+            log.warning("structures.md: the marker %s for the counter schema is missing", COUNTERS_MARKER)
+            return markdown
+        base = Path(__file__).resolve().parent.parent / "tracer" / "accel" / "base.py"
+        return markdown.replace(COUNTERS_MARKER, counter_table(base))
     if page.file.src_uri != "targets.md":
         return markdown
     targets, all_order = _targets()
