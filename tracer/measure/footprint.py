@@ -55,8 +55,8 @@ KDTREE_CLIP_BYTES_PER_TRI = 300
 GENERIC_BYTES_PER_TRI = 2 * KDTREE_BYTES_PER_TRI
 #: fixed bytes of any build (small arrays, stacks)
 BUILD_OVERHEAD = 64 << 10
-#: triangles per block of the geometry pass (its float64 temporaries stay near 4 MB)
-CHUNK = 1 << 14
+#: triangles per block of the geometry pass (its float64 temporaries stay near 2 MB)
+CHUNK = 1 << 13
 #: triangles the nested model follows level by level (a regular sample of larger scenes)
 NESTED_SAMPLE = 1 << 16
 

@@ -16,6 +16,7 @@ import hashlib
 import io
 import logging
 import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -186,7 +187,9 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
         try:
             z = np.load(cfile)
             report = {k[2:]: int(z[k]) for k in z.files if k.startswith("r_")}
-            return Scene(z["tris"], name, str(path), report)
+            scene = Scene(z["tris"], name, str(path), report)
+            _say_degenerate(path, scene)
+            return scene
         except Exception:  # a corrupt cache entry is rebuilt
             pass
     mesh = _read(path)
@@ -212,4 +215,14 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     scene = Scene(tris, name, str(path), report)
     if use_cache:
         atomic_savez(cfile, tris=scene.tris, **{f"r_{k}": v for k, v in report.items()})
+    _say_degenerate(path, scene)
     return scene
+
+
+def _say_degenerate(path: Path, scene: Scene) -> None:
+    """One stderr line when the mesh holds zero-area triangles (a mesh of nothing else was refused
+    by :func:`validate`): they are kept so triangle ids stay the file's, and no ray ever hits one."""
+    k = scene.report.get("degenerate", 0)
+    if k:
+        print(f"{path}: {k:,} of {scene.n:,} triangles are degenerate (zero area); kept, so triangle ids stay "
+              "the file's, and never hit", file=sys.stderr)

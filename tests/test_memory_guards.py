@@ -1,0 +1,155 @@
+"""Memory guards: every structure's build is estimated before it allocates (tracer.measure.footprint)
+and refused with the estimate over the budget; the estimate stays within 1.5x of tracemalloc's
+peak of the real build."""
+from __future__ import annotations
+
+import gc
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from tracer import build, load_scene
+from tracer.accel.base import Accel, structure_class
+from tracer.errors import GridcostError
+from tracer.measure import footprint
+from tracer.scenes.derived import array
+from tracer.scenes.scenetype import Scene
+from tracer.settings import Settings, use
+
+#: (structure, params) of every built-in structure and the variants whose arrays differ
+VARIANTS = [("grid", {}), ("grid", {"macro": 4, "exact": False, "mailbox": True}), ("nested", {}),
+            ("kdtree", {}), ("kdtree", {"clip": True}),
+            ("bvh", {}), ("bvh4", {}), ("cgt", {}), ("sortedlists", {})]
+SCENES = ("bunny-948", "bunny-69k", "sphere-100k")
+
+
+def _peak(scene, name, params) -> int:
+    gc.collect()
+    tracemalloc.start()
+    try:
+        build(scene, name, **params)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    out = {name: load_scene(name) for name in SCENES}
+    for name, params in VARIANTS:  # compile every kernel before anything is traced
+        build(out["bunny-948"], name, **params)
+    return out
+
+
+@pytest.mark.parametrize("name,params", VARIANTS, ids=[f"{n}-{'-'.join(map(str, p.values())) or 'default'}"
+                                                      for n, p in VARIANTS])
+def test_estimate_within_1_5x_of_the_traced_peak(scenes, name, params):
+    for sc in SCENES:
+        scene = scenes[sc]
+        est, how = footprint.estimate(name, structure_class(name)(**params), scene)
+        peak = _peak(scene, name, params)
+        assert how == "model"
+        assert peak > 0
+        assert 1 / 1.5 <= est / peak <= 1.5, f"{name} {params} on {sc}: estimate {est:,} B, traced peak {peak:,} B"
+
+
+def test_three_level_nested_estimate(scenes):
+    scene = scenes["bunny-69k"]
+    est, _ = footprint.estimate("nested", structure_class("nested")(levels=3), scene)
+    peak = _peak(scene, "nested", {"levels": 3})
+    assert 1 / 1.5 <= est / peak <= 1.5, (est, peak)
+
+
+def test_expected_refs_match_the_grid(scenes):
+    scene = scenes["bunny-69k"]
+    g = build(scene, "grid", cells=8 * scene.n)
+    ratio = footprint.expected_refs(scene, g.res_, True) / g.refs_
+    assert 0.9 < ratio < 1.1
+    bbox = build(scene, "grid", cells=8 * scene.n, exact=False)
+    assert footprint.expected_refs(scene, bbox.res_, False) == pytest.approx(bbox.refs_, rel=1e-3)
+
+
+@pytest.mark.parametrize("name", ["grid", "nested", "kdtree", "bvh", "bvh4", "cgt", "sortedlists"])
+def test_refused_under_a_tiny_budget_before_allocating(scenes, name):
+    scene = scenes["bunny-69k"]
+    est, _ = footprint.estimate(name, structure_class(name)(), scene)
+    gc.collect()
+    tracemalloc.start()
+    try:
+        with use(Settings.from_env().replace(memory_budget=1 << 20)):
+            with pytest.raises(GridcostError) as exc:
+                build(scene, name)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    msg = str(exc.value)
+    assert "\n" not in msg
+    assert f"structure {name!r} over 69,451 faces" in msg
+    assert footprint.fmt_bytes(est) in msg and "1.0 MiB" in msg and "GRIDCOST_MEMORY_BUDGET" in msg
+    assert peak < min(est / 2, 4 << 20), f"{name}: {peak:,} B allocated before the refusal"
+
+
+class _Plugin(Accel):
+    name = "plugin"
+
+    def build(self, scene):
+        raise AssertionError("a refused build must not start")
+
+
+class _Declared(_Plugin):
+    @classmethod
+    def estimate_bytes(cls, scene):
+        return 1000 * scene.n
+
+
+def test_plugin_structures_get_a_declared_or_generic_estimate(scenes):
+    scene = scenes["bunny-948"]
+    assert footprint.estimate("mine", _Declared(), scene) == (948_000, "declared")
+    est, how = footprint.estimate("mine", _Plugin(), scene)
+    assert est == 948 * footprint.GENERIC_BYTES_PER_TRI + footprint.BUILD_OVERHEAD
+    assert how.startswith("generic")
+    with pytest.raises(GridcostError, match="generic 2500 B per triangle"):
+        footprint.check_structure("mine", _Plugin(), scene, budget=1 << 20)
+    assert footprint.check_structure("mine", _Declared(), scene, budget=1 << 20) == 948_000
+
+
+def test_five_million_faces_refused_without_allocating_the_structure(scenes):
+    big = Scene(array(scenes["bunny-69k"].tris, 72, 0.1), name="array-72-10-bunny-69k")
+    assert big.n == 72 * 69_451
+    budget = 512 << 20
+    for name in ("grid", "nested", "kdtree", "bvh", "bvh4", "cgt", "sortedlists"):
+        gc.collect()
+        tracemalloc.start()
+        try:
+            with use(Settings.from_env().replace(memory_budget=budget)):
+                with pytest.raises(GridcostError) as exc:
+                    build(big, name)
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        est, _ = footprint.estimate(name, structure_class(name)(), big)
+        assert est > budget
+        assert f"over 5,000,472 faces would need about {footprint.fmt_bytes(est)}" in str(exc.value)
+        assert peak < 16 << 20, f"{name}: {peak:,} B allocated before refusing 5M faces"
+    # and the estimate is in proportion: a BVH of 5M faces is 72x one of bunny-69k
+    small, _ = footprint.estimate("bvh", structure_class("bvh")(), scenes["bunny-69k"])
+    est, _ = footprint.estimate("bvh", structure_class("bvh")(), big)
+    assert est == pytest.approx(72 * small, rel=0.01)
+    assert np.isfinite(est)
+
+
+def test_loading_a_mesh_with_degenerate_triangles_says_how_many_on_one_line(tmp_path, capsys):
+    from tracer.scenes.meshfile import load_mesh
+    mesh = tmp_path / "mixed.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 2 2\nf 1 2 3\nf 1 4 4\nf 2 2 2\n")
+    for use_cache in (False, True, True):  # parsed, written to the cache, read from it
+        scene = load_mesh(mesh, use_cache=use_cache)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert scene.n == 3 and scene.report["degenerate"] == 2
+        assert err == [f"{mesh}: 2 of 3 triangles are degenerate (zero area); kept, so triangle ids stay the "
+                       "file's, and never hit"]
+    clean = tmp_path / "clean.obj"
+    clean.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    load_mesh(clean, use_cache=False)
+    assert capsys.readouterr().err == ""
