@@ -10,7 +10,8 @@ from tracer.accel import COUNTER_NAMES, Counters
 from tracer.accel.base import COUNTER_SCHEMA
 
 CASES = [("grid", {"cells": 2000, "macro": 2}), ("grid", {"cells": 2000, "mailbox": True}),
-         ("nested", {"levels": 2}), ("kdtree", {}), ("bvh", {}), ("bvh4", {}), ("cgt", {"packet": 4}),
+         ("nested", {"levels": 2}), ("kdtree", {}), ("bvh", {}), ("bvh4", {}), ("wbvh", {"width": 8}), ("wbvh", {"width": 4}),
+         ("cgt", {"packet": 4}),
          ("sortedlists", {})]
 
 

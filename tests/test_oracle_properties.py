@@ -86,6 +86,12 @@ FAMILIES = {
         ("default", "bvh4", dict()),
         ("leaf1", "bvh4", dict(max_leaf=1)),
     ],
+    "wbvh": [
+        ("width8", "wbvh", dict(width=8)),
+        ("width4", "wbvh", dict(width=4)),
+        ("width8-leaf1-bins2", "wbvh", dict(width=8, max_leaf=1, bins=2)),
+        ("width8-leaf8", "wbvh", dict(width=8, max_leaf=8)),
+    ],
     "cgt": [
         ("packet", "cgt", dict(res=RES, packet=K)),
         ("packet-no-mailbox-no-cull", "cgt", dict(res=RES, packet=K, mailbox=False, frustum_cull=False)),
@@ -405,7 +411,7 @@ def _detail(case, hits, ref, bad):
 #: axis-parallel"; the oracle's spurious hits of the known bug occur up to about 1e-16
 NEARLY_PARALLEL = 1e-12
 #: the structures the known bug concerns (node tests in t)
-HIERARCHIES = ("kdtree", "bvh", "bvh4")
+HIERARCHIES = ("kdtree", "bvh", "bvh4", "wbvh")
 
 
 def nearly_axis_parallel(directions) -> np.ndarray:
@@ -532,7 +538,7 @@ REGRESSION_STRUCTURES = {
     "grid-res": ("grid", dict(res=(2, 2, 1))), "grid-auto": ("grid", {}), "nested": ("nested", dict(levels=2)),
     "cgt-res": ("cgt", dict(res=(2, 2, 1), packet=2)), "cgt-auto": ("cgt", dict(packet=2)),
     "kdtree": ("kdtree", {}), "kdtree-clip": ("kdtree", dict(clip=True)), "bvh": ("bvh", {}), "bvh4": ("bvh4", {}),
-    "sortedlists": ("sortedlists", {})}
+    "wbvh": ("wbvh", dict(width=8)), "sortedlists": ("sortedlists", {})}
 
 #: case -> (triangles, origins, directions, {structure label: the mark of the known bug it shows}).
 #:
@@ -571,11 +577,12 @@ REGRESSIONS = {
         np.array([[[0, 0, 1e5], [1, 0, 1e5], [0, 1, 1e5]]], np.float32), [[0.2, 0.2, 100001.0]], [[0.0, 0.0, -1.0]], {}),
     "margin-shrunk-grid": (
         np.array([[[0, 0, 1], [1e-4, 0, 1], [0, 0, 1.0001]]], np.float32), [[0.0, -2.0, 1.0001]], [[0.0, 1.0, 1e-30]],
-        {"bvh4": _BUG2}),
+        {"bvh4": _BUG2, "wbvh": _BUG2}),
     "margin-unit-at-1e5": (
         _UNIT + np.float32([0, 0, 1e5]), [[0.0, -2.0, 1e5 + 1]], [[0.0, 1.0, 1e-30]],
-        {"bvh": _BUG2, "bvh4": _BUG2}),
-    "nearly-parallel-two-triangles": (_UNIT, [[0.0, -2.0, 1.0]], [[0.0, 1.0, 1e-30]], {"bvh": _BUG2, "bvh4": _BUG2}),
+        {"bvh": _BUG2, "bvh4": _BUG2, "wbvh": _BUG2}),
+    "nearly-parallel-two-triangles": (_UNIT, [[0.0, -2.0, 1.0]], [[0.0, 1.0, 1e-30]],
+                                      {"bvh": _BUG2, "bvh4": _BUG2, "wbvh": _BUG2}),
     "nearly-parallel-shrunk-bvh": (
         np.array([[[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [1e-4, 0, 0], [0, 1e-4, 0]]], np.float32),
         [[9.999999747378752e-05, 0.0, -0.00014142431609798223]], [[1.807675018979014e-43, 0.0, 1.0]], {"bvh": _BUG2}),
@@ -588,7 +595,7 @@ REGRESSIONS = {
         [[1.0, -1e-30, 0.0]], {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2, "bvh4": _BUG2}),
     "nearly-parallel-one-triangle": (
         np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), [[1.0, 0.0, -1.0]], [[1e-20, 0.0, 1.0]],
-        {"bvh4": _BUG2}),
+        {"bvh4": _BUG2, "wbvh": _BUG2}),
 }
 
 
