@@ -1,6 +1,7 @@
 """Cost-model fits on synthetic data with known answers, and regression tests of the fitted
 exponents on data the tracer generates (work model: steps + 4 tests from the counters)."""
 import numpy as np
+import pandas as pd
 import pytest
 
 from costmodel.fit import (CounterCostFit, ExponentFit, GridCostFit, refine_minimum, select_model,
@@ -162,3 +163,26 @@ def test_exponent_ci_needs_six_scenes_over_two_decades():
     assert g.ci_text() == f"{g.ci_[0]:.2f}–{g.ci_[1]:.2f}"
     narrow = np.geomspace(1e3, 5e4, 8)  # enough scenes, 1.7 decades: still not determined
     assert not ExponentFit().fit(narrow, narrow ** 0.8).determined_
+
+
+def test_hapala_rc_split_recovers_a_paper_made_from_our_counters():
+    """A 'paper' whose times are our counted work priced at rho = 0.8 and a build of 0.05 grid rays per
+    N log2 N: the split finds rho, and pricing our counters with it brings all of the R_C gap back."""
+    from costmodel.gaps import hapala_rc_split, node_step_ratio
+    ours = pd.DataFrame({"N": [1e3, 1e4, 1e5, 1e6], "steps": [10.0, 14, 20, 30], "tests": [8.0, 9, 12, 15],
+                         "nodes": [15.0, 19, 24, 30], "leaves": [3.0, 4, 4, 5], "tests_h": [3.0, 3, 4, 4]})
+    ours["t_RG"] = 1e-7 * (ours.steps + 4 * ours.tests)
+    ours["t_RH"] = 0.9 * ours.t_RG                      # our hierarchy: barely faster per ray
+    ours["T_BH"] = 2e-7 * ours.N * np.log2(ours.N)
+    work_g = ours.steps + 4 * ours.tests
+    paper = pd.DataFrame({"t_RG": 3e-6 * work_g})
+    paper["t_RH"] = 3e-6 * (0.8 * (ours.nodes + ours.leaves) + 4 * ours.tests_h)
+    paper["T_BH"] = 0.05 * ours.N * np.log2(ours.N) * paper.t_RG
+    d = hapala_rc_split(ours, paper, eps=0.0)
+    np.testing.assert_allclose(d["rho_paper"], 0.8)
+    assert d["rho_paper_median"] == pytest.approx(0.8) and d["build_paper_per_nlogn"] == pytest.approx(0.05)
+    np.testing.assert_allclose(d["rc_both"], d["rc_paper"], rtol=1e-9)
+    np.testing.assert_allclose(d["back_both"], 100.0)
+    assert (d["rc_ours"] > d["rc_margin"]).all()  # the dearer node alone already lowers R_C
+    # rho from a time ratio, by hand: t_H/t_G = 0.5, work_G = 10 + 4*8 = 42, tests_H = 3, trav = 18
+    assert node_step_ratio(0.5, 10, 8, 18, 3) == pytest.approx((0.5 * 42 - 12) / 18)

@@ -72,12 +72,25 @@ def test_fig5_one_plane_per_scene_and_kind(out):
     df = pd.read_csv(out / "fig5" / "fig5.csv")
     planes = df.groupby(["scene", "ray_kind"])
     assert set(planes.groups) == {(s, k) for s in ("bunny-948", "capped-cylinder-196") for k in ("random", "camera")}
-    for _, g in planes:
-        assert len(g) == 9 and (g.pct_over_best >= 0).all()  # per round over that round's fastest
+    meta = json.loads((out / "fig5" / "meta.json").read_text())
+    for (scene, _), g in planes:
+        size = meta["planes"][scene]
+        assert len(g) == len(size["c1"]) * len(size["c2"]) >= 4 and (g.pct_over_best >= 0).all()
+        best = g.loc[g.pct_over_best.idxmin()]   # the interior flag says whether the fastest is inside
+        inside = min(size["c1"]) < best.c1 < max(size["c1"]) and min(size["c2"]) < best.c2 < max(size["c2"])
+        assert (g.interior == inside).all() and (g.widened == size["widened"]).all()
         assert (g.pct_over_best_sweep >= 0).all() and g.pct_over_best_sweep.min() == 0
         assert g.memory_pick.sum() == 1  # one memory-aware point per plane
     assert set(df.model_kind) == {"compact", "skinny"}
-    meta = json.loads((out / "fig5" / "meta.json").read_text())
     assert meta["kinds"] == ["random", "camera"]
     assert (out / "paper_figs" / "fig5.png").stat().st_size > 1000
     assert (out / "paper_figs" / "ize-levels.png").stat().st_size > 1000
+
+
+def test_fig5_plane_widens_toward_an_edge_optimum():
+    from experiments.ize.fig5 import interior, widen
+    c1, c2 = [1.0, 1.5, 2.5], [1.0, 2.0, 3.0]
+    assert widen(c1, c2, [(1.5, 2.0), (1.5, 2.0)]) is None          # interior in both kinds: as is
+    g1, g2 = widen(c1, c2, [(2.5, 2.0), (1.5, 1.0)])                 # right edge in c1, bottom edge in c2
+    assert g1 == [1.0, 1.5, 2.5, round(2.5 * 2.5 / 1.5, 4)] and g2 == [0.5, 1.0, 2.0, 3.0]
+    assert interior(g1, g2, 2.5, 1.0) and not interior(c1, c2, 2.5, 1.0)
