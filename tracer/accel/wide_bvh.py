@@ -28,7 +28,6 @@ lanes not counted).
 """
 from __future__ import annotations
 
-import functools
 import time
 
 import numpy as np
@@ -44,6 +43,7 @@ from tracer.accel.simd import ctz, popc, slab4, slab8
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.errors import GridcostError
 from tracer.measure.memory import check_budget, working_set
+from tracer.measure.provenance import bvh_width
 
 #: SAH weights of the canonical binary build, relative to one test of a block of four triangles:
 #: Embree prices a node traversal as one leaf block (kernels/bvh/bvh_builder_sah.cpp: ``travCost = 1``,
@@ -54,20 +54,10 @@ WIDE_BLOCK = 4
 NORD = 8
 
 
-@functools.lru_cache(maxsize=None)
 def host_width() -> int:
-    """Children per node for this CPU: 8 when LLVM reports AVX2 for the host (``<8 x float>`` is one
-    register), else 4."""
-    try:
-        import llvmlite.binding as llvm
-        feats = llvm.get_host_cpu_features()
-        return 8 if feats.get("avx2", False) else 4
-    except Exception:  # llvmlite cannot read this host's features: /proc/cpuinfo
-        try:
-            with open("/proc/cpuinfo") as f:
-                return 8 if " avx2" in f.read() else 4
-        except OSError:
-            return 4
+    """Children per node for this CPU (:func:`tracer.measure.provenance.bvh_width`, recorded in the
+    measurement key): 8 with AVX2, else 4."""
+    return bvh_width()
 
 
 def node_words(width: int) -> int:

@@ -187,6 +187,21 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+@functools.lru_cache(maxsize=None)
+def bvh_width() -> int:
+    """Children per node of the wide BVH (:mod:`tracer.accel.wide_bvh`) on this CPU: 8 when LLVM reports
+    AVX2 for the host (``<8 x float>`` is one register), else 4; /proc/cpuinfo when llvmlite cannot tell."""
+    try:
+        import llvmlite.binding as llvm
+        return 8 if llvm.get_host_cpu_features().get("avx2", False) else 4
+    except Exception:
+        try:
+            with open("/proc/cpuinfo") as f:
+                return 8 if " avx2" in f.read() else 4
+        except OSError:
+            return 4
+
+
 def host() -> str:
     return socket.gethostname()
 
@@ -206,12 +221,12 @@ def measurement_key(code_paths: tuple[str, ...], threads: int, clock: str) -> di
     """The key of a measurement: the kernel digest (and :func:`plugin_digest`), and the digest of :data:`MEASURE_FILES` and
     ``code_paths`` (files or package folders relative to the repository: the experiment and
     cost-model code that shapes the point),
-    the Numba thread count, the clock, the CPU model and :data:`KEY_LIBRARIES` versions. Hosts with
+    the Numba thread count, the clock, the CPU model, the wide BVH's width and :data:`KEY_LIBRARIES` versions. Hosts with
     the same CPU share points (the host is recorded per row, not keyed).
     :func:`tracer.measure.timing.measurement_key` fills in the current threads and clock."""
     code = hashlib.sha256((kernel_digest() + plugin_digest() + source_digest(*MEASURE_FILES, *sorted(code_paths))).encode())
     return {"code": code.hexdigest()[:16], "threads": int(threads),
-            "clock": clock, "cpu": cpu_model(), "versions": library_versions()}
+            "clock": clock, "cpu": cpu_model(), "bvh_width": bvh_width(), "versions": library_versions()}
 
 
 def key_digest(key: dict) -> str:
