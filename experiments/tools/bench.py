@@ -45,6 +45,8 @@ VARIANTS = {
     # the SAH's traversal weight measured on this machine in the same run (costmodel.kdcost.BvhSahFit:
     # the binary BVH's time fitted to its counters on small calibration meshes), not pbrt's 1/8
     "bvh4-sah-fit": ("bvh4", {"trav_cost": "fitted"}),
+    # 8 children with AVX2 (4 without), leaves of four triangles tested together (tracer.accel.wide_bvh)
+    "wbvh": ("wbvh", {}),
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
@@ -56,7 +58,7 @@ def default_names() -> list[str]:
 
 
 #: the structures whose Embree ratio is also measured in interleaved rounds (issue 15's goals)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "cgt")
+PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "cgt")
 
 
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
@@ -182,6 +184,12 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
         ratios["grid/trimesh"] = {k: s["grid"][f"{k}_mrays"] / s["trimesh"][f"{k}_mrays"] for k in rays}
     out["ratios"] = ratios
     out["paired"] = _paired(rays, kept, threads, log)
+    for key, v in out["paired"].items():  # the work behind each paired time: nodes and tests per ray
+        row = s.get(key.split("/")[0], {})
+        for kind, p in v.items():
+            if isinstance(p, dict) and f"{kind}_per_ray" in row:
+                p["nodes_per_ray"] = row[f"{kind}_per_ray"]["nodes"]
+                p["tests_per_ray"] = row[f"{kind}_per_ray"]["tests"]
     out["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     return out
 
@@ -191,6 +199,7 @@ def _paired(rays, kept, threads, log, rounds: int = 7) -> dict:
     :data:`PAIRED` that ran against Embree (all one thread, in the same rounds), and the grid's scaling
     from 1 to ``threads`` threads (wall time for both). Median, min and max of the per-round ratios."""
     import numba
+    import numpy as np
 
     from tracer.measure.timing import paired_ratio, time_paired
     out = {}
@@ -206,8 +215,11 @@ def _paired(rays, kept, threads, log, rounds: int = 7) -> dict:
             tp = time_paired(fns, rounds)
             for name in accels:
                 med, lo, hi = paired_ratio(tp, "embree", name)  # throughput ratio = time ratio inverted
-                out.setdefault(f"{name}/embree", {})[kind] = {"ratio": med, "min": lo, "max": hi, "rounds": rounds}
-                log(f"  paired {name}/embree {kind:7s} {med:6.3f}x  (rounds {lo:.3f}-{hi:.3f})")
+                ns, ens = (1e9 * float(np.median(tp[k])) / r.n for k in (name, "embree"))
+                out.setdefault(f"{name}/embree", {})[kind] = {"ratio": med, "min": lo, "max": hi, "rounds": rounds,
+                                                              "ns_per_ray": ns, "embree_ns_per_ray": ens}
+                log(f"  paired {name}/embree {kind:7s} {med:6.3f}x  (rounds {lo:.3f}-{hi:.3f}; "
+                    f"{ns:.0f} ns/ray vs Embree {ens:.0f})")
     if threads > 1:
         out["grid_scaling"] = {}
         def on(n, r):
@@ -286,6 +298,14 @@ def _summary(out: dict) -> str:
             lines.append(f"| {k} | " + " | ".join(
                 f"{v[kind]['ratio']:.3f} [{v[kind]['min']:.3f} – {v[kind]['max']:.3f}]" if kind in v else "–"
                 for kind in ("random", "camera")) + " |")
+        work = [(k, kind, v[kind]) for k, v in paired.items() for kind in ("random", "camera")
+                if "ns_per_ray" in v.get(kind, {})]
+        if work:
+            lines += ["", "Time per ray in those rounds (medians) beside the work behind it:", "",
+                      "| structure | rays | ns/ray | Embree ns/ray | nodes/ray | tests/ray |", "|---|---|---|---|---|---|"]
+            for k, kind, p in work:
+                lines.append(f"| {k.split('/')[0]} | {kind} | {p['ns_per_ray']:.0f} | {p['embree_ns_per_ray']:.0f} | "
+                             f"{p.get('nodes_per_ray', float('nan')):.2f} | {p.get('tests_per_ray', float('nan')):.2f} |")
     fit = out.get("bvh_sah_fit")
     if fit:
         lines += ["", f"bvh4-sah-fit: the BVH4 built with the SAH traversal weight C_trav/C_isect = {fit['trav_cost']:.3f} "
