@@ -9,6 +9,7 @@ import os
 import re
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,21 @@ def _load(name: str):
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _examples_file(page: str, code: str) -> Path:
+    """The page's examples as a script at a path that is the same in every run, rewritten (atomically)
+    only when they change: Numba caches a kernel an example defines (structures.md) by its file's
+    path and modification time, so a fresh path per run would add a cache folder per run and compile
+    the kernel every time."""
+    folder = Path(tempfile.gettempdir()) / f"gridcost-docs-examples-{os.getuid()}"
+    folder.mkdir(exist_ok=True)
+    script = folder / f"{page.replace('/', '_')}_examples.py"
+    if not script.is_file() or script.read_text() != code:
+        part = folder / f".{script.name}.{os.getpid()}"
+        part.write_text(code)
+        os.replace(part, script)
+    return script
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +102,7 @@ def test_python_examples_run(page, tmp_path):
     """Each page's Python blocks, in order, in one fresh interpreter (blocks build on each other)."""
     blocks = python_blocks(page)
     assert blocks, f"{page}.md: expected Python examples"
-    script = tmp_path / f"{page.replace('/', '_')}_examples.py"
-    script.write_text("\n\n".join(blocks))
+    script = _examples_file(page, "\n\n".join(blocks))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])),
            "MPLBACKEND": "Agg"}
     proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300,
