@@ -183,7 +183,8 @@ def test_clock_check_sees_kernel_work():
     from tracer.measure.timing import thread_clock_check
     chk = thread_clock_check()
     assert chk["ok"], chk
-    assert chk["thread"] > 0.5 * chk["wall"] > 0
+    # the calling thread did the process's work (a busy machine may preempt it: wall time is no test)
+    assert chk["thread"] > 0.5 * chk["process"] > 0 and chk["wall"] > 0
 
 
 def test_untrustworthy_thread_clock_falls_back_to_wall(monkeypatch, capsys):
