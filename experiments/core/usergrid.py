@@ -35,11 +35,14 @@ CONSTANTS_FORMAT = "gridcost-user-grid-constants/1"
 
 def read_timings(path) -> pd.DataFrame:
     """The user's timings, validated: one clear error naming the file and what is wrong."""
-    path = Path(path)
-    try:
-        df = pd.read_csv(path, comment="#", skipinitialspace=True)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise GridcostError(f"timings {path}: cannot read it as CSV ({exc})") from None
+    if isinstance(path, pd.DataFrame):  # the Python API's table: the same checks
+        df, path = path.copy(), "table"
+    else:
+        path = Path(path)
+        try:
+            df = pd.read_csv(path, comment="#", skipinitialspace=True)
+        except (OSError, ValueError, pd.errors.ParserError) as exc:
+            raise GridcostError(f"timings {path}: cannot read it as CSV ({exc})") from None
     df.columns = [str(c).strip().lower() for c in df.columns]
     per_axis = bool({"nx", "ny", "nz"} & set(df.columns))  # any of them: the per-axis form, say which is missing
     need = {"rays", "seconds"} | ({"nx", "ny", "nz"} if per_axis else {"cells"})
