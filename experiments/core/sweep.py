@@ -80,10 +80,6 @@ def grid_cells(scene, factors) -> list[dict]:
     return [{"cells": float(f * scene.n)} for f in factors]
 
 
-def best_row(rows: list[dict]) -> dict:
-    return min(rows, key=lambda r: r["anchored_seconds"])
-
-
 def as_arrays(rows, *cols):
     return tuple(np.array([r[c] for r in rows], float) for c in cols)
 

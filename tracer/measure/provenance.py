@@ -227,8 +227,3 @@ def measurement_key(code_paths: tuple[str, ...], threads: int, clock: str) -> di
     code = hashlib.sha256((kernel_digest() + plugin_digest() + source_digest(*MEASURE_FILES, *sorted(code_paths))).encode())
     return {"code": code.hexdigest()[:16], "threads": int(threads),
             "clock": clock, "cpu": cpu_model(), "bvh_width": bvh_width(), "versions": library_versions()}
-
-
-def key_digest(key: dict) -> str:
-    import json
-    return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]

@@ -229,14 +229,6 @@ def missing_message(found: Found) -> str:
             + ("" if stand_ins_allowed() else "; stand-ins are off (GRIDCOST_NO_STAND_INS=1)"))
 
 
-def locate(name: str, download: bool | None = None) -> Path:
-    """The verified file of mesh ``name``, or one :class:`GridcostError` saying how to get it."""
-    found = find(name, download)
-    if not found.found:
-        raise GridcostError(missing_message(found))
-    return found.path
-
-
 # ---------------------------------------------------------------- download
 class DownloadError(Exception):
     """Every source of a mesh failed (the message lists why)."""

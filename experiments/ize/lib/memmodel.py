@@ -10,7 +10,6 @@ of the scene's own swept points (:class:`costmodel.memory.SceneCalibratedFit`), 
 """
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
 from costmodel.memory import MemoryCostFit, SceneCalibratedFit, calibration_rows, model_optimum
@@ -51,10 +50,3 @@ def memory_aware_cells(df: pd.DataFrame, scene: str, kind: str, mach, structure:
         fit = SceneCalibratedFit(fit).fit(pts, pts.anchored_ns_per_ray)
         how = f"kappa {how}, Ts0 and Ti from {len(pts)} of the scene's swept points"
     return model_optimum(fit, test, x), how
-
-
-def working_set_note(rows: pd.DataFrame, mach) -> str:
-    """Largest grid working set of a scene's sweep against the caches (for the model-choice reading)."""
-    mx = float(np.nanmax(rows.memory_bytes))
-    l2 = mach.caches_.get("L2", 0)
-    return f"{mx / 2**20:.1f} MiB largest swept grid ({'over' if mx > l2 else 'within'} L2 {l2 >> 20} MiB)"
