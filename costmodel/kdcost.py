@@ -87,7 +87,7 @@ def fit_sah_constants(points) -> KdCostFit:
 BVH_SETTINGS = ({}, {"trav_cost": 0.5}, {"trav_cost": 2.0}, {"max_leaf": 1}, {"max_leaf": 8, "trav_cost": 1.0})
 #: calibration meshes of :func:`fit_bvh_trav_cost`: two small scans and the teapot, all shipped in
 #: tracer/data (a fresh clone offline fits on the real meshes, not stand-ins), none of the meshes
-#: issue 15's bench reports
+#: bench reports on (so its ratios are measured on meshes the fit never saw)
 BVH_CALIBRATION = ("bunny-16k", "dragon-11k", "teapot")
 
 

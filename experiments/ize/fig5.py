@@ -16,7 +16,7 @@ from tracer.scenes.rays import make_rays
 from tracer.scenes.scene import load_scene
 from tracer.measure.timing import set_threads
 
-#: Table 2 / Table 4's five scenes, the Fig 5 scenes of earlier runs (bunny-69k, dragon-48k) and the cylinder
+#: Table 2 / Table 4's five scenes, two mid-size scans (bunny-69k, dragon-48k) and the cylinder
 SCENES = {"bunny-948": "compact", "bunny-69k": "compact", "dragon-11k": "compact", "dragon-48k": "compact",
           "dragon-871k": "compact", "room": "compact", "capped-cylinder-3996": "skinny"}
 QUICK = {"bunny-948": "compact", "capped-cylinder-196": "skinny"}

@@ -26,7 +26,7 @@ from tracer.accel.grid import UniformGrid
 from tracer.accel.packet import CoherentGrid
 from tracer.measure.timing import clock_name
 
-#: the four meshes of issue 15's bench (its goals hold "on at least three of the four")
+#: the four meshes bench reports on (scans and a CAD part, none used to calibrate)
 SCENES = ["bunny-69k", "dragon-48k", "dragon-202k", "fandisk-x16"]
 QUICK_SCENES = ["bunny-948"]
 SIDES = (128, 256, 447, 512, 1024)
@@ -130,7 +130,7 @@ def _needs_reading(df) -> str:
 
 def _summary(df, fit, rounds) -> str:
     shares = [c for c in df.columns if c.startswith("share_")]
-    lines = ["# Packets at low resolution (issue 15; Wald 2006 Sec 4.2 and Fig 7's crossover)", "",
+    lines = ["# Packets at low resolution (Wald 2006 Sec 4.2 and Fig 7's crossover)", "",
              f"Camera rays side x side, one thread, {clock_name()}, {rounds} interleaved rounds per side; CGT 8x8 "
              "(lambda = 5, macrocells 6) against Embree (embreex, one thread) and the single-ray uniform grid at the "
              "CGT grid's resolution. Ratios are throughput ratios (CGT Mrays/s over the other's), medians of "
