@@ -444,24 +444,28 @@ def evaluate(cal: pd.DataFrame, make_estimator, C_values=None, n_splits: int = 2
     tg, th = total_times(cal, R)
     best = np.minimum(tg, th)
     rows = []
+    batched = type(make_estimator()) is GridcostEstimator  # many splits in one stacked fit (select_batch)
     for C in C_values:
-        errs, lost, chosen_sum, best_sum, forms = [], [], 0.0, 0.0, {}
-        for _ in range(n_splits):
-            p = rng.permutation(S)
-            ci, ei = p[:C], p[C:]
-            est = make_estimator().fit(subset(cal, ci))
-            forms[getattr(est, "form_", "")] = forms.get(getattr(est, "form_", ""), 0) + 1
-            ev = subset(cal, ei)
-            r_est = estimate_rc(est, ev, eps)
-            e = rc_error(r_est, rc_true[ei])
-            errs.append(e[np.isfinite(e)])
-            pick_grid = np.asarray(R)[None, :] <= np.asarray(r_est)[:, None]
-            ch = np.where(pick_grid, tg[ei], th[ei])
-            lost.append((ch / best[ei] - 1.0).ravel())
-            chosen_sum += ch.sum()
-            best_sum += best[ei].sum()
-        e = np.concatenate(errs) if errs else np.zeros(0)
-        lo = np.concatenate(lost)
+        perms = np.array([rng.permutation(S) for _ in range(n_splits)])
+        cal_idx, ev_idx = perms[:, :C], perms[:, C:]
+        if batched:
+            from costmodel.select_batch import fit_predict_splits
+            T, t, g, form_list = fit_predict_splits(make_estimator(), cal, cal_idx, ev_idx)
+            r_est = exact_rc(T, g, t, eps)
+        else:
+            r_est, form_list = np.empty(ev_idx.shape), []
+            for b in range(n_splits):
+                est = make_estimator().fit(subset(cal, cal_idx[b]))
+                form_list.append(getattr(est, "form_", ""))
+                r_est[b] = estimate_rc(est, subset(cal, ev_idx[b]), eps)
+        forms = {}
+        for f in form_list:
+            forms[f] = forms.get(f, 0) + 1
+        e = rc_error(r_est, rc_true[ev_idx]).ravel()
+        e = e[np.isfinite(e)]
+        ch = np.where(np.asarray(R)[None, None, :] <= r_est[..., None], tg[ev_idx], th[ev_idx])
+        lo = (ch / best[ev_idx] - 1.0).ravel()
+        chosen_sum, best_sum = ch.sum(), best[ev_idx].sum()
         row = {"C": C, "splits": n_splits, "n_err": int(e.size),
                "mean_err": float(e.mean()) if e.size else np.nan, "mean_abs_err": float(np.abs(e).mean()) if e.size else np.nan,
                "median_abs_err": float(np.median(np.abs(e))) if e.size else np.nan,

@@ -247,3 +247,25 @@ def test_selector_cli_json(run_cli, tmp_path):
     assert {"choice", "rc_est", "t_grid", "t_hier", "t_build_hier"} <= set(out)
     assert out["choice"] in ("grid", "bvh4") and out["t_grid"] > 0 and out["t_build_hier"] > 0
     assert out["rc_est"] is None or out["rc_est"] > 0
+
+
+@pytest.mark.parametrize("params", [{}, {"build_form": "a N^b", "ray_form": "a t_G^b", "grid_form": "sampled"}])
+def test_batched_evaluation_equals_one_split_at_a_time(params):
+    """evaluate() fits GridcostEstimator on all splits of a C at once (costmodel.select_batch); a
+    subclass takes the one-split path: both give the same errors, picks and forms."""
+    class OneAtATime(GridcostEstimator):
+        pass
+    rng = np.random.default_rng(7)
+    n = np.geomspace(300, 800_000, 14)
+    cal = synthetic_calibration(n=tuple(n), rho=None)
+    cal["t_RH"] *= np.exp(rng.normal(0, 0.3, len(cal)))          # noise: forms compete, caps and clips bite
+    cal["t_RG_sample"] = cal["t_RG"] * np.exp(rng.normal(0, 0.2, len(cal)))
+    cal["sigma"] = rng.uniform(1, 20, len(cal))
+    cal["sparseness_cells"] = rng.uniform(0.1, 0.9, len(cal))
+    cal["R_C"] = exact_rc(cal.T_BH, cal.t_RG, cal.t_RH)
+    fast = evaluate(cal, lambda: GridcostEstimator(**params), [1, 2, 4, 7, 13], 40, seed=3)
+    slow = evaluate(cal, lambda: OneAtATime(**params), [1, 2, 4, 7, 13], 40, seed=3)
+    num = [c for c in fast.columns if c != "top_form"]
+    np.testing.assert_allclose(fast[num].to_numpy(float), slow[num].to_numpy(float), rtol=1e-9, atol=1e-9)
+    assert list(fast.top_form) == list(slow.top_form)
+    assert fast.correct.between(0, 1).all() and (fast.n_err > 0).any()
