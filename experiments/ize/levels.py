@@ -10,7 +10,7 @@ import pandas as pd
 
 from experiments.core.common import add_ray_args, dash
 from experiments.core.figures import finish_log_panels, subplots
-from experiments.core.sweep import grid_cells, paired_penalties, penalty_pct, penalty_range, sweep
+from experiments.core.sweep import FULL_FACTORS, grid_cells, paired_penalties, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
 from costmodel.derive_nested import d_level_m1
 from costmodel.papers import ize2007
@@ -22,8 +22,12 @@ SCENES = list(PAPER4) + ["particles-100k"]
 QUICK_SCENES = ["bunny-948", "particles-2000"]
 KINDS = ("random", "camera")
 LEVELS = (2, 3)
-#: one-level grids swept from 2N to 32N (table2's best M lies in 4N..32N on these scenes)
-ONE_LEVEL_FACTORS, QUICK_ONE_LEVEL_FACTORS = [2.0, 4.0, 8.0, 16.0, 32.0], [2.0, 8.0, 32.0]
+#: a full run sweeps the one-level grid as table2 and table4 do (N/8 … 64N, 19 points) on table4's rays,
+#: so the three targets share those stored points and report the same best one-level grid; a quick run
+#: sweeps three points on fewer rays
+QUICK_ONE_LEVEL_FACTORS = [2.0, 8.0, 32.0]
+#: rays per kind: table4's budget in a full run (the two-level and one-level points are then table4's own)
+QUICK_RAYS, FULL_RAYS = 2_000, 100_000
 #: M1 swept from theory / 8 to 8 x theory in half-octaves of sqrt 2 squared (k/2 octaves)
 M1_STEPS, QUICK_M1_STEPS = range(-6, 7, 3), (-4, 0, 4)
 #: the paper's word on scattered data (Sec 4, abstract), no number
@@ -45,7 +49,7 @@ def m1_sweep(n: int, levels: int, quick: bool) -> list[dict]:
 
 def add_arguments(p) -> None:
     add_ray_args(p, "comma-separated scenes (default: Table 4's five and particles-100k; --quick bunny-948, "
-                    "particles-2000)", "rays per kind (default 20000; --quick 2000)",
+                    "particles-2000)", "rays per kind (default 100000, as table4; --quick 2000)",
                  "sweep rounds per point (default 5; --quick 3)")
 
 
@@ -53,7 +57,7 @@ def _scene_rows(ctx, scene, rays, store, repeats, quick) -> tuple[list[pd.DataFr
     """Sweep L = 2 and 3 and the one-level grid on one scene; re-time each L's theory point side by
     side with its two fastest swept M1 and the best one-level grid. Returns (sweep frames, table row)."""
     frames = []
-    one = pd.DataFrame(sweep(scene, "grid", grid_cells(scene, QUICK_ONE_LEVEL_FACTORS if quick else ONE_LEVEL_FACTORS),
+    one = pd.DataFrame(sweep(scene, "grid", grid_cells(scene, QUICK_ONE_LEVEL_FACTORS if quick else FULL_FACTORS),
                              rays, store, repeats, desc=f"ize-levels {scene.name} one-level"))
     one["levels"] = 1
     frames.append(one)
@@ -93,7 +97,7 @@ def _scene_rows(ctx, scene, rays, store, repeats, quick) -> tuple[list[pd.DataFr
 
 def run(ctx, args, log=print) -> dict:
     tr = begin(ctx, args, "ize-levels", (QUICK_SCENES, SCENES), threads=args.threads or 1, log=log)
-    n_rays, repeats = tr.ray_budget(2_000, 20_000)
+    n_rays, repeats = tr.ray_budget(QUICK_RAYS, FULL_RAYS)
     store = ctx.store()
     frames, table = [], []
     for _, scene in tr.scenes():
@@ -109,7 +113,8 @@ def run(ctx, args, log=print) -> dict:
 
 def _summary(tab, n_rays, repeats, threads, quick) -> str:
     sweep_txt = ("M1 at theory x 2^(-2, 0, 2), one-level M = 2N, 8N, 32N" if quick else
-                 "M1 from theory / 8 to 8 x theory in 7 steps of 2x, one-level M = 2N, 4N, 8N, 16N, 32N")
+                 "M1 at theory x 2^(-3, -1.5, 0, 1.5, 3); one-level M from N/8 to 64N in 19 points, the same rays "
+                 "and stored points as table2 and table4, so all three report the same best one-level grid")
     lines = ["# Three-level grids (Ize 2007 Sec 4.3, Eq 14-16) beside two-level grids and the best one-level grid", "",
              f"{n_rays:,} random rays per point (camera rays, {n_rays:,} on one pinhole view, in the last columns), "
              f"{threads} thread(s). Theory: L = 3 uses M1 = (8N)^(3/7), M2 = (8 N2)^(3/5), M3 = 8 N3 (Eq 16 applied "

@@ -116,7 +116,10 @@ def _summary(tab, n_rays, repeats, threads) -> str:
              f"{threads} thread(s). Sweep of M1 from (8N)^0.6/16 to 16 (8N)^0.6 with M2 = 8 N2. The penalty and "
              "the speed-up are re-timed side by side: the theory's M1, the three fastest swept M1 and the best "
              "one-level grid in interleaved rounds (median per-round ratio; in brackets its 95 % interval and the rounds "
-             "timed: rounds are added, from 11 up to 41, until every interval is within ±2 points).", "",
+             "timed: rounds are added, from 11 up to 41, until every interval is within ±2 points). The best one-level "
+             "grid is the fastest point of the one-level sweep (N/8 … 64N, 19 points) that table2 and ize-levels "
+             "share point for point (same rays, same stored points); table2's best M is that minimum refined by a "
+             "parabola in log M, so it may lie between two swept points.", "",
              "| model (paper) | N | best M1 | total cells: empirical ours (paper), theoretical ours (paper) | "
              "penalty ours (paper) | memory-aware M1, penalty (random / camera) | "
              "memory-aware, 3 scene points: M1, penalty (random / camera) | "
