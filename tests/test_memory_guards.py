@@ -153,3 +153,24 @@ def test_loading_a_mesh_with_degenerate_triangles_says_how_many_on_one_line(tmp_
     clean.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     load_mesh(clean, use_cache=False)
     assert capsys.readouterr().err == ""
+
+
+def test_fournier_object_counts_are_chunked_by_the_budget():
+    from experiments.fournier.lib import around
+    assert around.flat_chunk_rays(16_384) == around.FLAT_CHUNK_ELEMENTS // 16_384
+    with use(Settings.from_env().replace(memory_budget=64 << 20)):
+        assert around.flat_chunk_rays(16_384) == (64 << 20) // (4 * around.FLAT_BYTES_PER_ELEMENT) // 16_384 == 4
+        with pytest.raises(GridcostError, match="per-object event counts of one ray over 1,000,000 objects"):
+            around.flat_chunk_rays(1_000_000)
+    # chunked or not, the counts are the same
+    rng = np.random.default_rng(0)
+    lo = rng.random((50, 3))
+    boxes = np.concatenate([lo, lo + 0.1], 1)
+    o, d = rng.random((40, 3)) - 2, rng.random((40, 3)) + 0.1
+    f = np.full(40, np.inf)
+    whole = around.flat_object_counts(boxes, o, d, f)
+    with use(Settings.from_env().replace(memory_budget=50 * 4 * around.FLAT_BYTES_PER_ELEMENT * 3)):
+        chunked = around.flat_object_counts(boxes, o, d, f)
+    for k in whole:
+        assert np.array_equal(whole[k], chunked[k])
+    assert whole["tests"].sum() > 0

@@ -15,6 +15,18 @@ RAY_KINDS = ("primary", "shadow", "reflection")
 ORACLE_RAYS = 4096
 #: rays x objects elements per chunk of :func:`flat_object_counts` (a few arrays of this many float64)
 FLAT_CHUNK_ELEMENTS = 4_000_000
+#: bytes one (ray, object) element costs in a chunk of :func:`_flat_counts_chunk` (about twenty
+#: float64 (rays, objects) arrays live at once, the six-wide event array included)
+FLAT_BYTES_PER_ELEMENT = 256
+
+
+def flat_chunk_rays(n_objects: int) -> int:
+    """Rays per chunk of the (rays, objects) arrays: at most FLAT_CHUNK_ELEMENTS elements and a
+    quarter of the memory budget; one ray when even that is over the budget is refused."""
+    from tracer.measure.memory import check_budget, memory_budget
+    check_budget(f"per-object event counts of one ray over {n_objects:,} objects", n_objects * FLAT_BYTES_PER_ELEMENT)
+    per = min(FLAT_CHUNK_ELEMENTS, memory_budget() // (4 * FLAT_BYTES_PER_ELEMENT))
+    return max(1, per // max(1, n_objects))
 
 
 # ---------------------------------------------------------------- flat lists counted per object
@@ -30,7 +42,7 @@ def flat_object_counts(boxes, o, d, f) -> dict:
     the events behind the eye once per image)."""
     o, d, f = (np.asarray(a, np.float64) for a in (o, d, f))
     # rays in chunks: the arrays below are (rays, objects), 16,384 x 16,384 for tetra-7 at 128²
-    step = max(1, FLAT_CHUNK_ELEMENTS // max(1, len(boxes)))
+    step = flat_chunk_rays(len(boxes))
     parts = [_flat_counts_chunk(np.asarray(boxes, np.float64), o[i:i + step], d[i:i + step], f[i:i + step])
              for i in range(0, len(o), step)]
     return {k: np.concatenate([p[k] for p in parts]) for k in ("tests", "events", "events_ahead")}
