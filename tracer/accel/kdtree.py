@@ -26,9 +26,13 @@ third of pbrt's leaves; they are counted as visited, not stored). ``nodes_`` (st
 int32: interior ``[axis | flag << 2 | child << 4, split (float32 bits)]`` with flag 0: below at
 ``i + 1``, above at ``child``; 1: below is an empty leaf, above at ``i + 1``; 2: above is an empty
 leaf, below at ``i + 1``. Leaf ``[3 | count << 2, x]``: x is the triangle's index itself in a
-one-triangle leaf (most leaves: max_prims = 1), else the offset of the leaf's refs in ``tri_ids_``.
-``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the scene's triangle
-indices in leaf order and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
+one-triangle leaf (most leaves: max_prims = 1), else the leaf's first block of four in ``blocks_``.
+A leaf of two or more triangles is stored as ceil(count / 4) blocks of four triangles (the SoA
+layout of :mod:`tracer.accel.simd_tri`, padded with degenerate triangles) with their indices in
+``block_ids_`` (-1 padding), and tested four at a time in vector lanes by
+:func:`tracer.accel.simd_tri.ray_tri4`, whose lanes' t are ``ray_triangle``'s bit for bit.
+``nodes_f_`` is the float32 view of the same memory. ``tri_ids_`` (refs) holds the triangle indices
+in leaf order (the blocks are made from it) and ``tri_verts_`` (N, 9) float32 the triangles in scene order, not copied per
 ref (9+ refs per triangle at max_prims = 1 would not fit in L2 where the scene's triangles do).
 By default (``leaf_order=True``; False keeps scene order) the triangles are stored in the order the leaves first reference them
 (:func:`leaf_first_order`), so the triangles of neighbouring leaves share cache lines; the kernel
@@ -49,7 +53,8 @@ counts). The ray is widened to float64 with ``np.float64`` (Numba's
 ``float()`` keeps a float32 a float32) and passed to :func:`tracer.accel.geometry.ray_triangle` exactly
 as the grid and the oracle pass it, so a hit's t is bit-identical to the oracle's.
 Plane distances are float64 and every comparison of a plane or a hit with a node's t-range is
-widened by ``tol`` = T_EPS (2e-6) of the ray's t scale, so rounding can only add node visits,
+widened by ``tol`` = T_EPS (2e-6) of the ray's t scale (the range is kept widened, so a plane's
+distance is compared as computed, with no add on the node-to-node dependency chain), so rounding can only add node visits,
 never lose a hit — including hits that ray_triangle accepts on a triangle's very edge.
 Counters: ``setups`` 1 per ray meeting the root box, ``steps`` leaves visited (empty ones too),
 ``tests`` triangle tests, ``nodes`` nodes visited (interior + leaf) — pbrt's visits exactly.
@@ -59,6 +64,7 @@ from __future__ import annotations
 import math
 import time
 
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import prange, types
@@ -73,6 +79,7 @@ from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.accel.kdtree_clip import kd_build_clip
+from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import check_budget, working_set
 
 NCOUNT = len(COUNTER_NAMES)
@@ -117,11 +124,15 @@ def _slab_clip(lo, hi, o, inv, t0, t1):
 
 
 @jit
-def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, stack_size,
              out_t, out_id, counters):
     """Trace rays lo..hi-1 (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when ``anyhit``) with one
-    todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array."""
+    todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array; ``tv`` the
+    triangles (one-triangle leaves); ``blk``/``bids`` the blocks of four of the larger leaves (flat
+    float32, :data:`tracer.accel.simd_tri.TRI4_WORDS` a block) and their triangle indices (flat, four
+    a block, -1 padding)."""
     rs = np.empty(9, np.float64)  # origin, direction, inverse direction, indexed by axis
+    t4 = np.empty(4, np.float64)  # the lanes' t of a block test
     sn = np.empty(stack_size, np.int32)
     s0 = np.empty(stack_size, np.float64)
     s1 = np.empty(stack_size, np.float64)
@@ -157,8 +168,11 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
             rs[8] = iz
             sp = 0
             node = 0
-            ntmin = t0
-            ntmax = t1
+            # the node's t-range kept widened by tol on both sides (ntmin - tol, ntmax + tol), so a
+            # plane distance is compared as computed, with no add on the node-to-node chain
+            tol2 = tol + tol
+            ntmin = t0 - tol
+            ntmax = t1 + tol
             while True:
                 # descend from ``node`` to a leaf, front to back
                 while node >= 0:
@@ -196,10 +210,10 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
                     neg = d < 0.0
                     first = above if neg else below
                     second = below if neg else above
-                    lo_tp = tp - tol
-                    hi_tp = tp + tol
-                    only_first = lo_tp > ntmax
-                    only_second = hi_tp < ntmin
+                    lo_tp = tp - tol2  # the children's widened ranges end tol beyond the plane
+                    hi_tp = tp + tol2
+                    only_first = tp > ntmax
+                    only_second = tp < ntmin
                     both = not (only_first or only_second)
                     # branch-free: always write the todo entry, keep it only when both (and,
                     # without counters, only when it is not an empty leaf: visiting one only counts)
@@ -229,18 +243,18 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
                             best_id = x
                             if anyhit:
                                 break
-                    else:
+                    else:  # blocks of four from block x on, four triangles tested in vector lanes
+                        tests += cnt
                         done = False
-                        for rr in range(x, x + cnt):
-                            tid = ids[np.uintp(rr)]
-                            r = np.uintp(tid)
-                            tests += 1
-                            t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
-                                             tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7],
-                                             tv[r, 8], tmin, best)
-                            if t < best:
-                                best = t
-                                best_id = tid
+                        for bk in range(x, x + ((cnt + 3) >> 2)):
+                            hit = ray_tri4(blk, np.uintp(bk * TRI4_WORDS), ox, oy, oz, dx, dy, dz,
+                                           tmin, best, t4)
+                            if hit != 0:
+                                # the smallest t, ties to the first lane: the scalar loop's choice
+                                for k in range(4):
+                                    if (hit >> k) & 1 and t4[k] < best:
+                                        best = t4[k]
+                                        best_id = bids[np.uintp(4 * bk + k)]
                                 if anyhit:
                                     done = True
                                     break
@@ -256,7 +270,7 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
                     sp -= 1
                     spu = np.uintp(sp)
                     ntmin = s0[spu]
-                    if not best < ntmin - tol:
+                    if not best < ntmin:
                         node = sn[spu]
                         ntmax = s1[spu]
                         break
@@ -267,7 +281,7 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, id
 
 
 @pjit
-def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack_size,
+def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, stack_size,
              out_t, out_id, counters, nt):
     """Batched kd-tree traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer.accel._jit.BLOCK`), one todo stack per block.
     ``counters`` is an (m, 5) int32 array or None (None compiles the variant without counting)."""
@@ -275,7 +289,7 @@ def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, ids, stack
     for th in prange(nt):
         for b in range(th, nblocks(m), nt):
             kd_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, nodes,
-                     nodes_f, tv, ids, stack_size, out_t, out_id, counters)
+                     nodes_f, tv, blk, bids, stack_size, out_t, out_id, counters)
 
 
 def root_box(scene) -> np.ndarray:
@@ -306,6 +320,27 @@ def leaf_first_order(nodes: np.ndarray, tri_ids: np.ndarray, n: int) -> np.ndarr
     seen = seq[np.sort(first)]
     rest = np.setdiff1d(np.arange(n), seen, assume_unique=True)
     return np.concatenate([seen, rest]).astype(np.int64)
+
+
+def leaf_blocks(nodes: np.ndarray, tri_ids: np.ndarray, tv: np.ndarray):
+    """The leaves of more than one triangle as blocks of four (the SoA layout of
+    :mod:`tracer.accel.simd_tri`, padded with degenerate triangles, index -1): (blocks (B, 36)
+    float32, their indices (B, 4) int32). Rewrites such a leaf's second word from its offset in
+    ``tri_ids`` to its first block; one-triangle leaves keep their inline index."""
+    w = nodes[:, 0]
+    multi = np.flatnonzero(((w & 3) == LEAF) & ((w >> 2) > 1))
+    cnt = (w[multi] >> 2).astype(np.int64)
+    nb = (cnt + 3) // 4
+    first = np.cumsum(nb) - nb
+    ids = np.full((int(nb.sum()), 4), -1, np.int32)
+    # slot of each ref: block first + j // 4, lane j % 4
+    rep = np.repeat(np.arange(len(multi)), cnt)
+    j = np.arange(len(rep)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    ids[first[rep] + j // 4, j % 4] = tri_ids[nodes[multi, 1].astype(np.int64)[rep] + j]
+    v = tv[np.maximum(ids, 0)].astype(np.float32)  # (B, 4 lanes, 9 coordinates)
+    v[ids < 0] = 0.0  # padding: a degenerate triangle, which never hits
+    nodes[multi, 1] = first.astype(np.int32)
+    return np.ascontiguousarray(v.transpose(0, 2, 1).reshape(-1, TRI4_WORDS)), ids
 
 
 class KdTree(TreeTraceMixin, Accel):
@@ -388,6 +423,7 @@ class KdTree(TreeTraceMixin, Accel):
             self.tri_order_ = np.append(perm, -1).astype(np.int32)
         self.tri_ids_ = leaf_ids
         self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9))
+        self.blocks_, self.block_ids_ = leaf_blocks(nodes, leaf_ids, self.tri_verts_)
         self.box_ = root_box(scene) if n else np.zeros(6)
         self.build_seconds_ = time.perf_counter() - t_start
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
@@ -399,7 +435,15 @@ class KdTree(TreeTraceMixin, Accel):
         return self
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):
-        out_t, out_id, cnt = super()._trace(o, d, tmin, tmax, anyhit, count)
+        out_t, out_id, cnt = self._outputs(len(o), count)
+        if self.n_ == 0:
+            out_t[:] = np.inf
+            out_id[:] = -1
+            return out_t, out_id, cnt
+        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
+                 self.nodes_f_.reshape(-1), self.tri_verts_, self.blocks_.reshape(-1),
+                 self.block_ids_.reshape(-1), self._stack_size(), out_t, out_id, cnt,
+                 numba.get_num_threads())
         if self.tri_order_ is not None:  # stored (leaf-order) indices -> the scene's; -1 -> -1
             out_id = self.tri_order_[out_id]
         return out_t, out_id, cnt
@@ -418,10 +462,11 @@ class KdTree(TreeTraceMixin, Accel):
             "exp_inner": e["exp_inner"], "exp_leaves": e["exp_leaves"], "exp_tests": e["exp_tests"],
             "sah_cost": self.trav_cost * e["exp_inner"] + self.isect_cost * e["exp_tests"],
             "memory_bytes": int(self.nodes_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
+                                + self.blocks_.nbytes + self.block_ids_.nbytes
                                 + (0 if self.tri_order_ is None else self.tri_order_.nbytes)),
-            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes
+            "working_set": working_set(self.nodes_.nbytes, self.tri_ids_.nbytes + self.block_ids_.nbytes
                                        + (0 if self.tri_order_ is None else self.tri_order_.nbytes),
-                                       self.tri_verts_.nbytes),
+                                       self.tri_verts_.nbytes + self.blocks_.nbytes),
             "build_s": self.build_seconds_,
             "params": {"isect_cost": self.isect_cost, "trav_cost": self.trav_cost,
                        "empty_bonus": self.empty_bonus, "max_prims": self.max_prims},
