@@ -128,6 +128,36 @@ def test_kdtree_follows_pbrt_parameters():
     assert s["stored_nodes"] == s["nodes"] - s["empty_leaves"]
 
 
+def test_kdtree_leaf_blocks_hold_each_leaf_four_at_a_time():
+    """Leaves of two or more triangles as SoA blocks of four (simd_tri layout): every leaf's
+    triangles in order, -1 and degenerate padding, and the closest hits still the oracle's."""
+    from tracer.accel.kdtree import LEAF
+    sc = scene("bunny-948")
+    a = build(sc, "kdtree", max_prims=4, max_depth=14)
+    w = a.nodes_[:, 0]
+    multi = np.flatnonzero(((w & 3) == LEAF) & ((w >> 2) > 1))
+    assert len(multi) > 50  # the premise: many leaves of several triangles
+    blocks = a.blocks_.reshape(-1, 9, 4)  # (block, coordinate, lane)
+    ids = a.block_ids_
+    seen = 0
+    for node in multi:
+        cnt, first = int(w[node] >> 2), int(a.nodes_[node, 1])
+        lanes = ids[first:first + (cnt + 3) // 4].reshape(-1)
+        assert (lanes[:cnt] >= 0).all() and (lanes[cnt:] == -1).all()
+        v = blocks[first:first + (cnt + 3) // 4].transpose(0, 2, 1).reshape(-1, 9)
+        assert np.array_equal(v[:cnt], a.tri_verts_[lanes[:cnt]])
+        assert (v[cnt:] == 0).all()  # degenerate padding
+        seen += cnt
+    assert seen == int((w[multi] >> 2).sum()) and len(ids) == sum((int(c) + 3) // 4 for c in w[multi] >> 2)
+    r = rays("bunny-948", "random")
+    hits, cnt = a.intersect(r.origins, r.directions)
+    ref, ties = oracle("bunny-948", "random")
+    assert_agrees_exactly(hits, ref, ties, "kdtree max_prims=4")
+    hits2, _ = a.intersect(r.origins, r.directions, counters=False)
+    assert np.array_equal(hits.t, hits2.t) and np.array_equal(hits.tri_id, hits2.tri_id)
+    assert cnt.mean()["tests"] > 2 * accel("kdtree", "bunny-948").intersect(r.origins, r.directions)[1].mean()["tests"]
+
+
 @pytest.mark.parametrize("structure", STRUCTURES)
 def test_stats(structure):
     s = accel(structure, "particles-2000").stats()
