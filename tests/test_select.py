@@ -245,7 +245,7 @@ def test_selector_cli_json(run_cli, tmp_path):
     assert len(lines) == 1, proc.stdout
     out = json.loads(lines[0])
     assert {"choice", "rc_est", "t_grid", "t_hier", "t_build_hier"} <= set(out)
-    assert out["choice"] in ("grid", "bvh4") and out["t_grid"] > 0 and out["t_build_hier"] > 0
+    assert out["choice"] in ("grid", "wbvh") and out["t_grid"] > 0 and out["t_build_hier"] > 0
     assert out["rc_est"] is None or out["rc_est"] > 0
 
 

@@ -7,7 +7,7 @@ the grid (R <= R_C) or build the kd-tree (R > R_C).
 
 Without ``--scene`` (as in ``all``) it evaluates the decision on every scene table1h calibrated: each
 scene is left out of its own calibration, decided from its sampled grid time at ray budgets from 10^4
-to 10^9 for each hierarchy (kd-tree, BVH, BVH4) and estimator (gridcost's, the paper's), and scored
+to 10^9 for each hierarchy (kd-tree, BVH, wide BVH) and estimator (gridcost's, the paper's), and scored
 against "always grid", "always hierarchy" and the oracle: correct picks and the time a wrong pick
 loses. Its truth and R_C are table1h's records, so the two agree.
 """
@@ -44,8 +44,8 @@ def add_arguments(p) -> None:
     p.add_argument("--rays", type=float, default=None, help="number of rays R the application will shoot")
     p.add_argument("--kind", choices=("random", "path"), default="random",
                    help="ray kind to sample and calibrate on (default random)")
-    p.add_argument("--hierarchy", choices=HIERARCHIES, default="bvh4",
-                   help="the hierarchy the selector may build instead of the grid (default bvh4, gridcost's fastest)")
+    p.add_argument("--hierarchy", choices=HIERARCHIES, default="wbvh",
+                   help="the hierarchy the selector may build instead of the grid (default wbvh, gridcost's fastest)")
     p.add_argument("--estimator", choices=tuple(ESTIMATORS), default="gridcost",
                    help="gridcost (ours, default) or hapala (the paper's Eq 7/8)")
     p.add_argument("--sample-rays", type=int, default=DEFAULT_SAMPLE, help="rays sampled on the grid (default 1000)")
