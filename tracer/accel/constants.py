@@ -27,3 +27,8 @@ WALD_MACROCELL = 6
 #: Hapala, Karlik & Havran 2011, Sec. 4: R_C = T_B^H / (t_R^G (1 + eps) - t_R^H), eps = 0.01.
 HAPALA_EPS = 0.01
 
+#: the wide BVH's SAH weights (tracer.accel.wide_bvh), relative to one test of a block of four triangles:
+#: Embree prices a node traversal as one leaf block (Embree 4 ``kernels/bvh/bvh_builder_sah.cpp``:
+#: ``travCost = 1``, leaf cost ``Primitive::blocks(n)``, four triangles per ``Triangle4`` block)
+WIDE_TRAV_COST = 1.0
+WIDE_BLOCK = 4

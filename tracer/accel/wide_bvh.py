@@ -44,12 +44,8 @@ from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.errors import GridcostError
 from tracer.measure.memory import check_budget, working_set
 from tracer.measure.provenance import bvh_width
+from tracer.accel.constants import WIDE_BLOCK, WIDE_TRAV_COST
 
-#: SAH weights of the canonical binary build, relative to one test of a block of four triangles:
-#: Embree prices a node traversal as one leaf block (kernels/bvh/bvh_builder_sah.cpp: ``travCost = 1``,
-#: leaves in ``Primitive::blocks(n)``, four triangles per Triangle4 block)
-WIDE_TRAV_COST = 1.0
-WIDE_BLOCK = 4
 #: order words per node (one per octant of direction signs)
 NORD = 8
 
