@@ -44,13 +44,14 @@ NESTED_BYTES_PER_REF = 82
 NESTED_KEPT_PER_CELL = 8
 NESTED_KEPT_PER_REF = 4
 #: tracemalloc peak per triangle of the hierarchies' builds (see the module docstring):
-#: measured 279-288 (bvh), 367-420 (bvh4), 264-267 (sortedlists), 333-1653 (kdtree: particles to
-#: bunny-948, reference duplication), 220-428 (kdtree clip=True)
+#: measured 279-288 (bvh), 367-420 (bvh4), 264-267 (sortedlists), 333-2797 (kdtree: particles-50k to
+#: sphere-100k; 150 B per reference plus 157 B per triangle, with 1.2 to 18.6 references per triangle
+#: and leaves stored as blocks of four), 269-710 (kdtree clip=True)
 BVH_BYTES_PER_TRI = 285
 BVH4_BYTES_PER_TRI = 395
 SORTEDLISTS_BYTES_PER_TRI = 266
-KDTREE_BYTES_PER_TRI = 1250
-KDTREE_CLIP_BYTES_PER_TRI = 300
+KDTREE_BYTES_PER_TRI = 2100
+KDTREE_CLIP_BYTES_PER_TRI = 550
 #: a structure nothing is known of: the largest per-triangle figure above, doubled
 GENERIC_BYTES_PER_TRI = 2 * KDTREE_BYTES_PER_TRI
 #: fixed bytes of any build (small arrays, stacks)
