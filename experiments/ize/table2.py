@@ -36,6 +36,11 @@ def add_arguments(p) -> None:
                  "rays per kind (default 100000; --quick 10000)", "timed repeats per point (default 5)")
 
 
+def _usable(ratio) -> bool:
+    """A fitted Ti/Ts that gives a grid: finite and positive (noisy timings can price a test at zero)."""
+    return bool(np.isfinite(ratio) and ratio > 0)
+
+
 def run(ctx, args, log=print) -> dict:
     # one pinned thread: per-ray costs without scheduling noise
     tr = begin(ctx, args, "table2", (QUICK_SCENES, [p[0] for p in PAPER]), threads=args.threads or 1, log=log)
@@ -73,11 +78,13 @@ def run(ctx, args, log=print) -> dict:
     for name, scene in scenes.items():
         sub = df[(df.scene == name)]
         pts = {2.0 * scene.n * ratio} | {mem[(name, kind)][0] for kind in KINDS for mem in (mem_m, mem_c)}
-        if np.isfinite(scene_ratio[name]):
+        if _usable(scene_ratio[name]):
             pts.add(2.0 * scene.n * scene_ratio[name])
         for kind in KINDS:
             k = sub[sub.ray_kind == kind]
             pts.add(refine_minimum(k.cells, k.anchored_ns_per_ray))
+        # a model that prices a step or a test at zero on noisy timings proposes no grid at all: not measured
+        pts = {m for m in pts if np.isfinite(m) and round(m) >= 1}
         extra += sweep(scene, "grid", [{"cells": float(round(m))} for m in sorted(pts)], rays[name], store,
                        repeats, desc=f"table2 {name} (refine)")
     df = pd.concat([df, pd.DataFrame(extra)], ignore_index=True)
@@ -97,7 +104,7 @@ def run(ctx, args, log=print) -> dict:
                          "mape_pct": g.metrics_["mape"], "cond": g.cond_, "m_pred_eq4": g.optimum()})
             suffix = "" if kind == "random" else f"_{kind}"
             # penalties re-measured side by side with the three fastest swept points (paired rounds)
-            rs = nearest(k, 2.0 * scene.n * scene_ratio[name]) if np.isfinite(scene_ratio[name]) else rf
+            rs = nearest(k, 2.0 * scene.n * scene_ratio[name]) if _usable(scene_ratio[name]) else rf
             rm = nearest(k, mem_m[(name, kind)][0])
             rc = nearest(k, mem_c[(name, kind)][0])
             pp = paired_penalties(scene, "grid", {"fitted": {"cells": float(rf.param_cells)},
