@@ -20,7 +20,7 @@ N_RAYS = 2000
 VARIANTS = {"exact": dict(exact=True, mailbox=False), "exact-mailbox": dict(exact=True, mailbox=True),
             "bbox": dict(exact=False, mailbox=False), "bbox-mailbox": dict(exact=False, mailbox=True),
             "index": dict(layout="index"), "index-mailbox": dict(layout="index", mailbox=True),
-            "copy": dict(layout="copy")}
+            "copy": dict(layout="copy"), "blocks-mailbox": dict(layout="blocks", mailbox=True)}
 
 _RAYS: dict = {}
 _ORACLE: dict = {}
@@ -560,13 +560,13 @@ def test_grid_axis_aligned_rays_on_cell_planes(bunny):
 # ---------------------------------------------------------------- vertex layout
 def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
     """"auto" reads vertices through the triangle id when the triangles fit in L2 and their
-    cell-order copy would not (long skinny triangles), and keeps the copy otherwise."""
+    cell-order copy would not (long skinny triangles), and keeps the copy (as SoA blocks) otherwise."""
     from tracer.accel.grid import choose_layout
     from tracer.scenes.scene import load_scene
     monkeypatch.setenv("GRIDCOST_L2", "1M")
     assert choose_layout("auto", 3996, 214_196) == "index"  # 144 KiB of triangles, 7.4 MiB copied
-    assert choose_layout("auto", 948, 8_000) == "copy"  # the copy fits in L2 as well
-    assert choose_layout("auto", 69_451, 200_000) == "copy"  # the triangles alone exceed L2
+    assert choose_layout("auto", 948, 8_000) == "blocks"  # the copy fits in L2 as well
+    assert choose_layout("auto", 69_451, 200_000) == "blocks"  # the triangles alone exceed L2
     assert choose_layout("copy", 3996, 214_196) == "copy"
     cyl = load_scene("cylinder-3996")
     grid = UniformGrid(cells=132_651).build(cyl)
@@ -580,6 +580,25 @@ def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
     np.testing.assert_array_equal(a.tri_id, b.tri_id)
     np.testing.assert_array_equal(a.t, b.t)
     assert (a.tri_id >= 0).sum() > 1000
+
+
+@pytest.mark.parametrize("kw", [{}, {"mailbox": True}, {"macro": 2, "factor": 16}])
+def test_blocks_layout_same_hits_and_counts_as_copy(bunny, kw):
+    """Four references per ray_tri4 call (blocks not aligned to cells, other cells' lanes masked):
+    the same t, ids and counters as the scalar loop over the copy, also for any-hit queries."""
+    rays = rays_for(bunny, "adversarial")
+    copy = UniformGrid(layout="copy", **kw).build(bunny)
+    blocks = UniformGrid(layout="blocks", **kw).build(bunny)
+    assert blocks.stats()["vertex_bytes"] == 36 * (-(-blocks.refs_ // 4) * 4)  # the copy's bytes, padded to 4
+    (a, ca), (b, cb) = copy.intersect(rays.origins, rays.directions), blocks.intersect(rays.origins, rays.directions)
+    np.testing.assert_array_equal(a.tri_id, b.tri_id)
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(ca.data, cb.data)
+    assert (b.tri_id >= 0).sum() > rays.n // 4 and (cb["tests"] >= 4).sum() > 100  # several blocks per ray
+    tmax = np.where(a.tri_id >= 0, a.t * (1 + 1e-5), np.inf).astype(np.float32)
+    (_, ia, ka), (_, ib, kb) = (g._trace(rays.origins, rays.directions, 0.0, tmax, True, True) for g in (copy, blocks))
+    np.testing.assert_array_equal(ia, ib)  # any hit: the first reference hit, as the scalar loop
+    np.testing.assert_array_equal(ka, kb)  # counts up to that reference
 
 
 def test_unknown_layout_is_refused():

@@ -2,9 +2,11 @@
 3D-DDA traversal with early termination, optional mailboxing and per-ray counters.
 
 Layout (flat arrays, no Python objects): ``cell_start_`` (M + 1, int32) and ``tri_ids_`` (refs,
-int32) in CSR form, and ``tri_verts_`` float32 rows of 9: the triangles copied into cell order (one
-row per reference, read contiguously), or for long skinny triangles one row per triangle (see
-:func:`choose_layout`).
+int32) in CSR form, and the triangles' vertices: ``tri_verts_`` float32 rows of 9 copied into cell
+order (one row per reference, read contiguously, "copy"), or for long skinny triangles one row per
+triangle ("index"), or ``tri_blocks_``: the cell-order copy transposed into SoA blocks of four
+references (:mod:`tracer.accel.simd_tri`, "blocks"), so a cell's list is tested four references at
+a time with :func:`~tracer.accel.simd_tri.ray_tri4` (see :func:`choose_layout`).
 """
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ from tracer.accel import COUNTER_NAMES, Accel
 from tracer.accel.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle, tri_box_overlap
+from tracer.accel.simd import ctz, popc
+from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import cache_bytes, check_budget, working_set
 
 #: direct-mapped mailbox entries per thread (power of two)
@@ -56,14 +60,16 @@ def res_wald(bounds, n_tris: int, lam: float = WALD_LAMBDA) -> np.ndarray:
 
 def choose_layout(layout: str, n_tris: int, refs: int) -> str:
     """Where a cell's triangle vertices are read from. "copy": duplicated into cell order (36 B per
-    reference, read contiguously); "index": one row per triangle reached through the reference's id.
-    "auto" takes "index" when the triangles fit in L2 but their cell-order copy does not — long
-    skinny triangles, referenced by tens of cells each (cylinder-3996 at 132k cells: 343 against
-    561 ns per random ray); compact meshes keep the copy (bunny-69k at 8N: index 9 % slower)."""
+    reference, read contiguously); "blocks": the same copy transposed into SoA blocks of four
+    consecutive references (the same bytes, at most three rows of padding at the end), tested four
+    at a time; "index": one row per triangle reached through the reference's id. "auto" takes
+    "index" when the triangles fit in L2 but their cell-order copy does not — long skinny triangles,
+    referenced by tens of cells each (cylinder-3996 at 132k cells: 343 against 561 ns per random
+    ray); compact meshes take the blocks."""
     if layout != "auto":
         return layout
     l2 = cache_bytes(2)
-    return "index" if n_tris * TRI_ROW_BYTES <= l2 < refs * TRI_ROW_BYTES else "copy"
+    return "index" if n_tris * TRI_ROW_BYTES <= l2 < refs * TRI_ROW_BYTES else "blocks"
 
 
 def grid_params(bounds, res) -> np.ndarray:
@@ -151,7 +157,7 @@ def grid_build_bytes(ncell: int, refs: int, n: int, layout: str = "copy", macro:
     """Peak bytes a grid build allocates (cell array, occupancy bits, reference ids, vertex rows in
     cell order or one per triangle, and with macrocells the block occupancy pass: an int32 diff,
     two bool arrays); checked against the measured peak by tests/test_memory.py."""
-    b = ncell * BUILD_BYTES_PER_CELL + refs * BUILD_BYTES_PER_REF + (refs if layout == "copy" else n) * TRI_ROW_BYTES
+    b = ncell * BUILD_BYTES_PER_CELL + refs * BUILD_BYTES_PER_REF + (n if layout == "index" else refs) * TRI_ROW_BYTES
     if macro:
         b += ncell * (4 + 1 + 1)
     return int(b + 4)
@@ -170,14 +176,16 @@ def _block_exit(o, d, lo, bsize, b):
 
 @jit(inline="always")
 def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
-             cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None, tvi=None):
+             cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None, tvi=None, tb=None, t4=None):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).
 
     Returns (t, tri_id, setups, steps, tests, skips, jumps, occupied); ``occupied`` counts the
     visited cells that hold at least one reference (the steps that load a reference list). ``mb`` is the (chunks, MAILBOX) mailbox
     array or None (mailboxing compiled out). ``macro`` is the macrocell occupancy (blocks of
     2^mshift cells per axis, uint8, x fastest) or None: entering a cell of an empty block, the ray
-    jumps to the block's exit and the DDA is set up again there."""
+    jumps to the block's exit and the DDA is set up again there. ``tb`` (flat float32 SoA blocks of
+    four references, "blocks" layout, with ``t4`` a float64[4] scratch) or None: the vertices are
+    read from ``tv`` (``tvi`` None: "copy", else "index")."""
     t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin, tmax)
     if t0 > t1:
         return INF, -1, 0, 0, 0, 0, 0, 0
@@ -233,6 +241,46 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
                 r1 = cell_start[cu + np.uintp(1)]
         if r1 > r0:
             occupied += 1
+        if tb is not None:
+            # the references r0..r1-1 lie in the blocks r0 >> 2 .. (r1 - 1) >> 2 (blocks are not
+            # aligned to cells: no padding); each block is tested whole and the lanes outside the
+            # cell are masked off. The hit lanes are taken in reference order with a strict <, so
+            # the nearest hit and, on equal t, the first reference win, as in the scalar loop below.
+            r = r0
+            while r < r1:
+                blk = r >> 2
+                first = blk << 2
+                valid = ((1 << min(r1 - first, 4)) - 1) & ~((1 << (r - first)) - 1)
+                r = first + 4
+                skipm = 0
+                if mb is not None:
+                    v = valid
+                    while v != 0:
+                        k = ctz(v)
+                        v &= v - 1
+                        tid = tri_ids[np.uintp(first + k)]
+                        h = tid & (MAILBOX - 1)
+                        if mb[chunk, h] == tid:
+                            skipm |= 1 << k
+                        else:
+                            mb[chunk, h] = tid
+                    valid &= ~skipm
+                    skips += popc(skipm)
+                    if valid == 0:
+                        continue
+                tests += popc(valid)
+                hm = ray_tri4(tb, np.uintp(TRI4_WORDS) * np.uintp(blk), ox, oy, oz, dx, dy, dz, tmin, best, t4) & valid
+                while hm != 0:
+                    k = ctz(hm)
+                    hm &= hm - 1
+                    if t4[k] < best:
+                        best = t4[k]
+                        best_ref = first + k
+                        if anyhit:  # the counts the scalar loop stops at: nothing after lane k
+                            rest = -(1 << (k + 1))
+                            return (best, tri_ids[np.uintp(best_ref)], 1, steps, tests - popc(valid & rest),
+                                    skips - popc(skipm & rest), jumps, occupied)
+            r1 = r0  # the scalar loop below has nothing left to do
         for r in range(r0, r1):
             ru = np.uintp(r)
             if mb is not None:
@@ -274,18 +322,19 @@ def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
 
 @pjit
 def grid_trace(O, D, tmin, tmax, anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv,
-               out_t, out_id, counters, mb, macro, mshift, occ, tvi, nt):
+               out_t, out_id, counters, mb, macro, mshift, occ, tvi, nt, tb=None):
     """Batched grid traversal: ``prange`` over the ``nt`` threads, each taking every nt-th block of
     BLOCK rays (see :data:`tracer.accel._jit.BLOCK`). ``counters`` and ``mb`` (one mailbox row per thread)
     are arrays or None; None compiles a variant without that code (Numba prunes the branches)."""
     m = O.shape[0]
     for th in prange(nt):
+        t4 = np.empty(4, np.float64)
         for b in range(th, nblocks(m), nt):
             for i in range(b * BLOCK, min(m, (b + 1) * BLOCK)):
                 t, tid, su, st, te, sk, ju, oc = grid_ray(
                     np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]),
                     np.float64(D[i, 0]), np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]),
-                    anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ, tvi)
+                    anyhit, gp, nx, ny, nz, cell_start, tri_ids, tv, mb, th, macro, mshift, occ, tvi, tb, t4)
                 store_ray(out_t, out_id, counters, i, t, tid, su, st, te, 0, sk, oc, ju)
 
 
@@ -299,13 +348,29 @@ def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
     return np.ascontiguousarray(pad.reshape(bz, k, by, k, bx, k).any(axis=(1, 3, 5)).astype(np.uint8).ravel())
 
 
+@jit
+def soa_blocks(tv, tri_ids):
+    """The cell-order copy of the triangles (row r = triangle ``tri_ids[r]``) as flat float32 SoA
+    blocks of four references (block b holds references 4b..4b+3, word 12 v + 4 a + lane: vertex v,
+    axis a), the last block padded with zeros (a degenerate triangle; its lanes are masked anyway)."""
+    refs = tri_ids.shape[0]
+    out = np.zeros(((refs + 3) // 4) * TRI4_WORDS, np.float32)
+    for r in range(refs):
+        t = tri_ids[r]
+        base = (r >> 2) * TRI4_WORDS + (r & 3)
+        for w in range(9):
+            out[base + 4 * w] = tv[t, w]
+    return out
+
+
 def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0):
     """The grid build shared by the one-level grid and the packet grid: count references per cell
     into an int32 array, turn the counts into starts in place, fill the ids (the starts advance to
     the ends: no cursor array), copy vertex rows per ``layout`` ("auto" through :func:`choose_layout`)
     and set the occupancy bits. The memory guard checks :func:`grid_build_bytes` before allocating
     (before counting with one reference per triangle, after counting with the real count).
-    Returns (cell_start, tri_ids, tri_verts, occupancy bits, layout)."""
+    Returns (cell_start, tri_ids, tri_verts, occupancy bits, layout); ``tri_verts`` is flat
+    (:func:`soa_blocks`) for "blocks", (rows, 9) otherwise."""
     ncell = int(np.prod(res))
     what = f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}"
     if ncell >= 2**31:
@@ -322,7 +387,10 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
     tri_ids = np.empty(refs, dtype=np.int32)
     grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, tri_ids, True)
     tv = scene.tris.reshape(-1, 9)
-    tri_verts = np.ascontiguousarray(tv if layout == "index" else tv[tri_ids])
+    if layout == "blocks":
+        tri_verts = soa_blocks(tv, tri_ids)
+    else:
+        tri_verts = np.ascontiguousarray(tv if layout == "index" else tv[tri_ids])
     occ = np.zeros((ncell + 7) // 8, np.uint8)
     occupancy_bits(cell_start, occ)
     return cell_start, tri_ids, tri_verts, occ, layout
@@ -345,8 +413,8 @@ class UniformGrid(Accel):
 
     def __init__(self, cells=None, res=None, rule=None, lam=WALD_LAMBDA, clamp=True, exact=True,
                  mailbox=False, factor=None, macro=0, layout="auto"):
-        if layout not in ("auto", "copy", "index"):
-            raise GridcostError(f"grid layout must be 'auto', 'copy' or 'index', got {layout!r}")
+        if layout not in ("auto", "copy", "blocks", "index"):
+            raise GridcostError(f"grid layout must be 'auto', 'copy', 'blocks' or 'index', got {layout!r}")
         self.layout = layout
         self.cells, self.res, self.rule, self.lam = cells, res, rule, lam
         self.clamp, self.exact, self.mailbox, self.factor = clamp, exact, mailbox, factor
@@ -376,7 +444,10 @@ class UniformGrid(Accel):
         gp = grid_params(scene.bounds, res)
         cell_start, tri_ids, tri_verts, occ, layout = fill_cells(scene, res, gp, self.exact, self.layout, self.macro)
         refs = len(tri_ids)
-        self.cell_start_, self.tri_ids_, self.tri_verts_, self.occ_, self.layout_ = cell_start, tri_ids, tri_verts, occ, layout
+        self.cell_start_, self.tri_ids_, self.occ_, self.layout_ = cell_start, tri_ids, occ, layout
+        # "blocks": the vertices live in tri_blocks_ only (tri_verts_ empty, the scalar path unused)
+        self.tri_blocks_ = tri_verts if layout == "blocks" else None
+        self.tri_verts_ = np.zeros((0, 9), np.float32) if layout == "blocks" else tri_verts
         self.mshift_ = int(self.macro).bit_length() - 1 if self.macro else 0
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start
@@ -391,20 +462,22 @@ class UniformGrid(Accel):
         nx, ny, nz = (int(r) for r in self.res_)
         grid_trace(o, d, tmin, tmax, anyhit, self.gp_, nx, ny, nz, self.cell_start_, self.tri_ids_,
                    self.tri_verts_, out_t, out_id, cnt, mb, self.macro_, self.mshift_, self.occ_,
-                   self.tri_ids_ if self.layout_ == "index" else None, numba.get_num_threads())
+                   self.tri_ids_ if self.layout_ == "index" else None, numba.get_num_threads(), self.tri_blocks_)
         return out_t, out_id, cnt
 
     def stats(self) -> dict:
         ncell = int(np.prod(self.res_))
         occ = np.diff(self.cell_start_)
+        vb = self.tri_verts_.nbytes + (self.tri_blocks_.nbytes if self.tri_blocks_ is not None else 0)
         return {
             "structure": "grid", "res": [int(r) for r in self.res_], "cells": ncell,
             "refs": int(self.refs_), "refs_per_tri": self.refs_ / max(self.n_, 1),
             "empty_cells": int((occ == 0).sum()), "max_refs": int(occ.max(initial=0)),
-            "working_set": working_set(self.cell_start_.nbytes + self.occ_.nbytes, self.tri_ids_.nbytes,
-                                       self.tri_verts_.nbytes),
-            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + self.tri_verts_.nbytes
-                                + self.occ_.nbytes),
+            "working_set": working_set(self.cell_start_.nbytes + self.occ_.nbytes, self.tri_ids_.nbytes, vb),
+            "memory_bytes": int(self.cell_start_.nbytes + self.tri_ids_.nbytes + vb + self.occ_.nbytes),
+            # the vertices as stored: "blocks" holds the copy's 36 B per reference plus at most
+            # three padding rows (vertex_bytes - 36 refs)
+            "vertex_bytes": int(vb),
             "build_s": self.build_seconds_, "exact": self.exact, "mailbox": self.mailbox,
             "macro": self.macro, "layout": self.layout_,
         }
