@@ -587,13 +587,11 @@ def test_blocks_layout_same_hits_and_counts_as_copy(bunny, kw):
     """Four references per ray_tri4 call (blocks not aligned to cells, other cells' lanes masked):
     the same t, ids and counters as the scalar loop over the copy, also for any-hit queries."""
     rays = rays_for(bunny, "adversarial")
-    copy = UniformGrid(layout="copy", **kw).build(bunny)
-    blocks = UniformGrid(layout="blocks", **kw).build(bunny)
+    copy, blocks = (UniformGrid(layout=lay, **kw).build(bunny) for lay in ("copy", "blocks"))
     assert blocks.stats()["vertex_bytes"] == 36 * (-(-blocks.refs_ // 4) * 4)  # the copy's bytes, padded to 4
     (a, ca), (b, cb) = copy.intersect(rays.origins, rays.directions), blocks.intersect(rays.origins, rays.directions)
-    np.testing.assert_array_equal(a.tri_id, b.tri_id)
-    np.testing.assert_array_equal(a.t, b.t)
-    np.testing.assert_array_equal(ca.data, cb.data)
+    for x, y in ((a.tri_id, b.tri_id), (a.t, b.t), (ca.data, cb.data)):
+        np.testing.assert_array_equal(x, y)
     assert (b.tri_id >= 0).sum() > rays.n // 4 and (cb["tests"] >= 4).sum() > 100  # several blocks per ray
     tmax = np.where(a.tri_id >= 0, a.t * (1 + 1e-5), np.inf).astype(np.float32)
     (_, ia, ka), (_, ib, kb) = (g._trace(rays.origins, rays.directions, 0.0, tmax, True, True) for g in (copy, blocks))
