@@ -42,7 +42,11 @@ def test_exact_timings_give_back_the_constants_and_the_true_best(tmp_path):
     true_cost = sum(TRUE[c] * table[k] for k, c in (("setups", "tsetup"), ("steps", "ts"), ("tests", "ti")))
     best = res["recommendation"]["best"]
     assert best["cells"] == int(table.cells[int(np.argmin(true_cost))])
-    assert len(table) == len(candidates(scene)) >= 20
+    fr = res["recommendation"]["factor_range"]
+    timed = res["work"].cells / scene.n
+    assert fr == pytest.approx([timed.min() / 2, timed.max() * 2])   # the timed range, widened 2x either way
+    assert len(table) == len(candidates(scene, fr)) >= 10
+    assert (table.cells / scene.n).between(fr[0] * 0.8, fr[1] * 1.25).all()  # whole divisions round the cells
 
 
 def test_noisy_timings_keep_the_truth_inside_the_intervals(tmp_path):

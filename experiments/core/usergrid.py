@@ -105,16 +105,34 @@ def count_work(scene, grids, rays: Rays, grid_params: dict | None = None) -> pd.
     return pd.DataFrame(rows)
 
 
-def candidates(scene) -> list[tuple[int, int, int]]:
-    """The per-axis divisions a best resolution is chosen among (:data:`CANDIDATE_FACTORS` x N)."""
-    seen = dict.fromkeys(tuple(int(v) for v in res_from_cells(scene.bounds, f * scene.n)) for f in CANDIDATE_FACTORS)
+#: how far beyond the resolutions a user timed (cells / N) a recommendation may reach, either way: a
+#: model fitted on a range is not trusted far outside it (a step cost fitted as zero would otherwise
+#: send every recommendation to the finest candidate)
+EXTRAPOLATION = 2.0
+
+
+def candidates(scene, factor_range=None) -> list[tuple[int, int, int]]:
+    """The per-axis divisions a best resolution is chosen among (:data:`CANDIDATE_FACTORS` x N), within
+    ``factor_range`` (lo, hi) of cells / N when given (the timed range widened by :data:`EXTRAPOLATION`)."""
+    fs = [f for f in CANDIDATE_FACTORS if factor_range is None or factor_range[0] <= f <= factor_range[1]]
+    if factor_range is not None:
+        fs = sorted(set(fs) | {factor_range[0], factor_range[1]})
+    seen = dict.fromkeys(tuple(int(v) for v in res_from_cells(scene.bounds, f * scene.n)) for f in fs)
     return list(seen)
 
 
-def recommend(fit: WorkTimeFit, scene, rays: Rays, grid_params=None, budget_rays: float | None = None) -> dict:
+def timed_factor_range(work: pd.DataFrame, n: int) -> tuple[float, float]:
+    """The cells / N of the timed rows, widened by :data:`EXTRAPOLATION` either way."""
+    f = work.cells.to_numpy(float) / n
+    return float(f.min() / EXTRAPOLATION), float(f.max() * EXTRAPOLATION)
+
+
+def recommend(fit: WorkTimeFit, scene, rays: Rays, grid_params=None, budget_rays: float | None = None,
+              factor_range=None) -> dict:
     """The fitted constants applied to ``scene``: the predicted time per ray at every candidate
-    resolution, the best one, and the resolutions within the bootstrap's spread of the best."""
-    work = count_work(scene, candidates(scene), rays, grid_params)
+    resolution (within ``factor_range`` of cells / N), the best one, and the resolutions within the
+    bootstrap's spread of the best."""
+    work = count_work(scene, candidates(scene, factor_range), rays, grid_params)
     best = fit.best(work)
     work["predicted_s_per_ray"] = best["predicted"]
     work["best_share"] = best["share"]
@@ -124,7 +142,7 @@ def recommend(fit: WorkTimeFit, scene, rays: Rays, grid_params=None, budget_rays
                                                      for k in ("nx", "ny", "nz", "cells", "predicted_s_per_ray")},
            "best_factor": float(b.cells / scene.n),
            "cells_range": [int(likely.cells.min()), int(likely.cells.max())] if len(likely) else None,
-           "table": work}
+           "factor_range": list(factor_range) if factor_range is not None else None, "table": work}
     if budget_rays:
         out["best"]["predicted_s"] = float(b.predicted_s_per_ray * budget_rays)
     return out
@@ -140,7 +158,7 @@ def fit_timings(timings: pd.DataFrame, scene, rays: Rays, grid_params=None) -> d
     work["seconds_per_ray"] = t_ray
     work["fitted_s_per_ray"] = fit.predict(work)
     work["loo_error_pct"] = fit.loo_
-    rec = recommend(fit, scene, rays, grid_params)
+    rec = recommend(fit, scene, rays, grid_params, factor_range=timed_factor_range(work, scene.n))
     return {"fit": fit, "work": work, "recommendation": rec}
 
 
@@ -152,6 +170,7 @@ def constants_record(res: dict, scene, kind: str, grid_params, source: str) -> d
             "model": "T_ray = tsetup * setups + ts * steps + ti * tests (seconds per ray; counters per ray)",
             **fit.summary(), "grid_params": grid_params or {},
             "predicted_best": res["recommendation"]["best"], "predicted_cells_range": res["recommendation"]["cells_range"],
+            "factor_range": res["recommendation"]["factor_range"],
             "rows": res["work"].to_dict(orient="records")}
 
 

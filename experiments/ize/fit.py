@@ -186,4 +186,8 @@ def _timings_summary(rec: dict) -> str:
     lines += ["", f"Predicted best resolution: {b['nx']} x {b['ny']} x {b['nz']} = {b['cells']:,} cells "
               f"({b['cells'] / on['N']:.2f} N), {b['predicted_s_per_ray'] * 1e9:.1f} ns per ray"
               + (f"; the best under 5 %+ of the bootstrap's constants spans {rng[0]:,} – {rng[1]:,} cells." if rng else ".")]
+    fr = rec.get("factor_range")
+    if fr:
+        lines.append(f"Candidates span {fr[0]:.3g} N to {fr[1]:.3g} N: the resolutions you timed, widened 2x either "
+                     "way (the model is not carried further from its data).")
     return "\n".join(lines) + "\n"

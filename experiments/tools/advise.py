@@ -202,7 +202,8 @@ def _your_grid(ctx, args, started) -> int:
     fit = fit_from_record(rec)
     scene = load_mesh(args.mesh) if args.mesh else load_scene(args.scene)
     rays = counting_rays(scene, args.kind, args.seed)
-    out = recommend(fit, scene, rays, rec.get("grid_params") or {}, budget_rays=args.rays)
+    out = recommend(fit, scene, rays, rec.get("grid_params") or {}, budget_rays=args.rays,
+                    factor_range=rec.get("factor_range"))
     table = out.pop("table")
     top = table.sort_values("predicted_s_per_ray").head(5)
     b = out["best"]
