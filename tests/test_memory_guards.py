@@ -20,7 +20,7 @@ from tracer.settings import Settings, use
 #: (structure, params) of every built-in structure and the variants whose arrays differ
 VARIANTS = [("grid", {}), ("grid", {"macro": 4, "exact": False, "mailbox": True}), ("nested", {}),
             ("kdtree", {}), ("kdtree", {"clip": True}),
-            ("bvh", {}), ("bvh4", {}), ("cgt", {}), ("sortedlists", {})]
+            ("bvh", {}), ("bvh4", {}), ("wbvh", {}), ("cgt", {}), ("sortedlists", {})]
 SCENES = ("bunny-948", "bunny-69k", "sphere-100k")
 
 
@@ -70,7 +70,7 @@ def test_expected_refs_match_the_grid(scenes):
     assert footprint.expected_refs(scene, bbox.res_, False) == pytest.approx(bbox.refs_, rel=1e-3)
 
 
-@pytest.mark.parametrize("name", ["grid", "nested", "kdtree", "bvh", "bvh4", "cgt", "sortedlists"])
+@pytest.mark.parametrize("name", ["grid", "nested", "kdtree", "bvh", "bvh4", "wbvh", "cgt", "sortedlists"])
 def test_refused_under_a_tiny_budget_before_allocating(scenes, name):
     scene = scenes["bunny-69k"]
     est, _ = footprint.estimate(name, structure_class(name)(), scene)
@@ -118,7 +118,7 @@ def test_five_million_faces_refused_without_allocating_the_structure(scenes):
     big = Scene(array(scenes["bunny-69k"].tris, 72, 0.1), name="array-72-10-bunny-69k")
     assert big.n == 72 * 69_451
     budget = 512 << 20
-    for name in ("grid", "nested", "kdtree", "bvh", "bvh4", "cgt", "sortedlists"):
+    for name in ("grid", "nested", "kdtree", "bvh", "bvh4", "wbvh", "cgt", "sortedlists"):
         gc.collect()
         tracemalloc.start()
         try:

@@ -13,7 +13,7 @@ Each estimate is an inventory of the arrays the build holds at its peak:
   size h that a triangle overlaps in a grid laid at random over it is the volume of the triangle
   swept by an h-cube, sum(projected areas) / h^2 + sum(extents) / h + 1, exact in expectation for
   flat convex pieces);
-* hierarchies (``bvh``, ``bvh4``, ``sortedlists``, ``kdtree``): node counts are bounded by the
+* hierarchies (``bvh``, ``bvh4``, ``wbvh``, ``sortedlists``, ``kdtree``): node counts are bounded by the
   faces (a BVH leaf holds >= 1 triangle, the sorted lists' slots are N + nodes), so their peak is
   bytes per triangle; the kd-tree's sorted-edge work area (3 axes x 8N x 8 B) and its reference
   duplication (1-19 references per triangle on the meshes measured) are folded into one figure.
@@ -50,6 +50,8 @@ NESTED_KEPT_PER_REF = 4
 BVH_BYTES_PER_TRI = 285
 BVH4_BYTES_PER_TRI = 395
 SORTEDLISTS_BYTES_PER_TRI = 266
+#: the wide BVH (binary SAH build collapsed, leaves in blocks of four): 339-349 on the four meshes
+WBVH_BYTES_PER_TRI = 345
 KDTREE_BYTES_PER_TRI = 2100
 KDTREE_CLIP_BYTES_PER_TRI = 550
 #: a structure nothing is known of: the largest per-triangle figure above, doubled
@@ -176,7 +178,8 @@ def _nested(inst, scene) -> int:
 
 
 #: structure name -> estimate(inst, scene) of its build's peak bytes (beside BUILD_OVERHEAD)
-_PER_TRI = {"bvh": BVH_BYTES_PER_TRI, "bvh4": BVH4_BYTES_PER_TRI, "sortedlists": SORTEDLISTS_BYTES_PER_TRI}
+_PER_TRI = {"bvh": BVH_BYTES_PER_TRI, "bvh4": BVH4_BYTES_PER_TRI, "wbvh": WBVH_BYTES_PER_TRI,
+            "sortedlists": SORTEDLISTS_BYTES_PER_TRI}
 ESTIMATES = {
     "grid": _grid,
     "cgt": _cgt,
