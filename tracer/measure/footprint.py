@@ -153,7 +153,9 @@ def _nested(inst, scene) -> int:
     pieces = area + sext + 1.0
     cid = np.ravel_multi_index(tuple(np.clip(cen.T.astype(np.int64), 0, res1[:, None] - 1)), tuple(res1))
     cells_l, refs_l = float(np.prod(res1)), float(pieces.sum()) * scale
-    cnt = np.bincount(cid)[cid] * scale * (refs_l / max(n, 1))
+    # a cell holds at most one reference per triangle of the scene (a large triangle spreads its pieces
+    # over many cells, it does not stack them in its centroid's)
+    cnt = np.minimum(np.bincount(cid)[cid] * scale * (refs_l / max(n, 1)), n)
     h = np.ones(len(area))
     alive = np.ones(len(area), bool)
     peak = kept = 0.0
@@ -171,7 +173,8 @@ def _nested(inst, scene) -> int:
         h = h / np.cbrt(sub)
         new = np.where(alive, area / h**2 + sext / h + pieces, 0.0)
         refs_l = float(new.sum()) * scale
-        cnt = np.where(alive, cnt * (new / np.maximum(pieces, 1e-30)) / np.minimum(sub, 1.5 * sub ** (2.0 / 3.0)), 0.0)
+        cnt = np.where(alive, np.minimum(cnt * (new / np.maximum(pieces, 1e-30))
+                                         / np.minimum(sub, 1.5 * sub ** (2.0 / 3.0)), n), 0.0)
         pieces = new
     # the leaf rows gathered at the end, beside what the levels keep
     return int(max(peak, kept + refs_l * TRI_ROW_BYTES))
