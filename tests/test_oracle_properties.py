@@ -550,6 +550,11 @@ REGRESSION_STRUCTURES = {
 #:   divided by the zero thickness.
 #: * "margin-shrunk-grid" (shrunk) and "margin-unit-at-1e5": the box top was the top vertex's z
 #:   exactly, and a ray in that plane rising at d_z = 1e-30 left the grid's box at t = 0.
+#: FIXED (``tracer.accel.oracle.compare``, found here): a hit beyond float32's range.
+#: * "subnormal-direction-beyond-float32" (shrunk): a ray 1e-4 from a triangle moving towards it at
+#:   d_x = -1.4e-45 hits it at t = 7.1e40 in float64; every structure returns float32 t = inf with
+#:   the right id, and the comparison used the unrounded t. The oracle's t is now compared rounded
+#:   to float32, as the structures return it.
 #: KNOWN BUG (the hierarchies' node tests in t: ``tracer.accel.kdtree``, ``bvh``, ``bvh4``): a ray
 #: starting in the plane of a node box face or split plane and leaving it with a direction
 #: component in (0, ~1e-16] of the others meets a vertex or edge on that plane by
@@ -593,6 +598,9 @@ REGRESSIONS = {
     "nearly-parallel-kdtree-unit": (
         np.array([[[0, 2, 0], [0, 1, 1], [0, 1, 0]], [[0, 0, 0]] * 3], np.float32), [[-2.0, 1.0, 0.0]],
         [[1.0, -1e-30, 0.0]], {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2, "bvh4": _BUG2}),
+    "subnormal-direction-beyond-float32": (
+        np.array([[[1e-4, 0, 0]] * 3] * 6 + [[[0, 0, 0], [0, 1e-4, 0], [0, 0, 1e-4]]], np.float32),
+        [[9.999999747378752e-05, 0.0, 0.0]], [[-1.401298464324817e-45, 0.0, 0.0]], {}),
     "nearly-parallel-one-triangle": (
         np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), [[1.0, 0.0, -1.0]], [[1e-20, 0.0, 1.0]],
         {"bvh4": _BUG2, "wbvh": _BUG2}),

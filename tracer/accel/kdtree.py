@@ -80,7 +80,7 @@ from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.accel.kdtree_clip import kd_build_clip
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
-from tracer.measure.memory import check_budget, working_set
+from tracer.measure.memory import check_budget, fmt_bytes, memory_budget, working_set
 
 NCOUNT = len(COUNTER_NAMES)
 
@@ -395,8 +395,14 @@ class KdTree(TreeTraceMixin, Accel):
             wt[:, :2 * n] = ev_t
             wc[:, :2 * n] = ev_c
             del ev_t, ev_c
-            built = kd_build(wt, wc, n, rootb, depth, *costs)
+            budget = memory_budget()
+            built = kd_build(wt, wc, n, rootb, depth, *costs, budget)
             del wt, wc
+            if built[4] < 0:
+                raise GridcostError(
+                    f"a kd-tree over {n:,} triangles of {scene.name} outgrew the memory budget of "
+                    f"{fmt_bytes(budget)} while building (its triangles are duplicated into many leaves); "
+                    f"raise it with GRIDCOST_MEMORY_BUDGET, or use clip=True or a smaller max_depth")
         (w0, w1, spl, leaf_ids, nleaves, nempty, depth_reached, s_inner, s_leaf, s_tests, root_area) = built
         inner = (w0 & 3) != LEAF
         w1 = np.where(inner, spl.view(np.int32), w1).astype(np.int32)

@@ -278,13 +278,24 @@ def _edge_partition(ev_t, ev_c, flag, base, n, ba, best_off):
 
 
 @jit
-def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_cost, empty_bonus):
+def held_bytes(ev_t, w0, leaf_ids):
+    """Bytes the edge build holds: edge lists (float32 t + int32 code, 3 axes), node words (two
+    int32 and a float32 split) and leaf references (int32)."""
+    return ev_t.shape[1] * 24 + w0.shape[0] * 12 + leaf_ids.shape[0] * 4
+
+
+@jit
+def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_cost, empty_bonus, max_bytes):
     """pbrt-v2 KdTreeAccel::buildTree, iterative, on pre-sorted edge lists (see module doc).
 
     ``ev_t``/``ev_c`` (3, cap) hold the root's sorted edges in [0, 2N); the tail is the work area
     (children's edge lists are written there, stack-like). Returns (node word 0, node word 1,
     split, leaf prim ids, leaves, empty leaves, max depth reached, SAH sums: interior area, leaf
-    area, leaf area x count; root area)."""
+    area, leaf area x count; root area).
+
+    SAH duplication (1 to 19 references per triangle on the meshes measured) is not known before
+    the build, so the build checks what it holds (:func:`held_bytes`) each time an array grows and
+    stops when that exceeds ``max_bytes``: it then returns the empty result with leaves = -1."""
     flag = np.zeros(max(n_prims, 1), np.uint8)
     w0, w1, spl, leaf_ids, ic, fs, st, st_bounds, bounds, root_area = tree_arrays(n_prims, max_depth, root)
     sp = 1
@@ -308,6 +319,11 @@ def kd_build(ev_t, ev_c, n_prims, root, max_depth, max_prims, isect_cost, trav_c
             continue
         tsplit = ev_t[ba, base + best_off]
         ev_t, ev_c, n_lo, n_hi = _edge_partition(ev_t, ev_c, flag, base, n, ba, best_off)
+        if held_bytes(ev_t, w0, leaf_ids) > max_bytes:
+            ic[0] = 0
+            ic[1] = 0
+            ic[2] = -1
+            break
         # the below child's edges were written on top of the work area
         sp = split_node(w0, w1, spl, fs, st, st_bounds, sp, node, ba, tsplit, bounds, area, base + 2 * n,
                         n_lo, base, n_hi, depth, bad)

@@ -85,14 +85,19 @@ def compare(hits: Hits, ref: Hits, ref_ties: np.ndarray, rtol: float = 1e-5) -> 
     A ray disagrees on hit/miss, on t beyond ``rtol`` relative, or on the triangle id — except that a
     different id at the same t where the oracle saw other triangles at that t is a *tie* (duplicate
     faces, shared edges), reported separately and not a disagreement.
+
+    The oracle's float64 t is compared as the structures return it, rounded to float32: a hit
+    beyond float32's range (a subnormal direction component) is a hit at t = inf for both.
     """
     hit_a = hits.tri_id >= 0
     hit_b = ref.tri_id >= 0
     hitmiss = hit_a != hit_b
     both = hit_a & hit_b
     ta = np.where(both, hits.t.astype(np.float64), 0.0)
-    tb = np.where(both, ref.t, 0.0)
-    t_bad = both & (np.abs(ta - tb) > rtol * np.maximum(np.abs(tb), 1e-30))
+    with np.errstate(over="ignore"):
+        tb = np.where(both, ref.t.astype(np.float32).astype(np.float64), 0.0)
+    with np.errstate(invalid="ignore"):  # inf - inf: the same out-of-range hit
+        t_bad = both & (np.abs(ta - tb) > rtol * np.maximum(np.abs(tb), 1e-30))
     id_diff = both & ~t_bad & (hits.tri_id != ref.tri_id)
     tie = id_diff & (ref_ties > 0)
     id_bad = id_diff & ~tie
