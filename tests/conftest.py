@@ -55,6 +55,20 @@ def gridcost_cache(tmp_path_factory):
         os.environ["GRIDCOST_CACHE"] = old
 
 
+@pytest.fixture
+def one_numba_thread():
+    """Run the test with one Numba thread, so timings use this thread's CPU time, which the other
+    xdist worker's load does not inflate. With two threads and wall time a ~1 ms kernel beside a
+    busy worker measured as slow as a 50x larger one (a one-cell grid read 0.2 % over an 8N grid)."""
+    import numba
+
+    from tracer.measure.timing import set_threads
+    threads = numba.get_num_threads()
+    set_threads(1)
+    yield
+    set_threads(threads)
+
+
 _SCENES: dict = {}
 
 

@@ -195,7 +195,7 @@ def test_memprobe_hollow_rays_and_costs():
     assert memprobe.excess(rows, c)[0] == pytest.approx(500.0 - model)
 
 
-def test_paired_timing_of_points_and_planes(tmp_path):
+def test_paired_timing_of_points_and_planes(tmp_path, one_numba_thread):
     """Side-by-side timing: penalties are relative to the fastest point (>= 0 up to round noise, a
     clearly worse grid costs more), results are stored and a rerun returns them unchanged."""
     from experiments.core.sweep import paired_penalties, paired_plane
@@ -215,7 +215,7 @@ def test_paired_timing_of_points_and_planes(tmp_path):
     assert paired_penalties(scene, "grid", {"one": points[1]}, [points[0]], rays, store, quick=True) == pen
 
 
-def test_sweep_times_points_beside_a_reference(tmp_path):
+def test_sweep_times_points_beside_a_reference(tmp_path, one_numba_thread):
     """Every sweep point is timed beside the scene's 8N grid: the reference configuration itself
     comes out at a ratio of ~1, times are ratio x one stored anchor, and a later sweep of the same
     scene (refinement points) reuses that anchor."""
@@ -229,18 +229,9 @@ def test_sweep_times_points_beside_a_reference(tmp_path):
     # other xdist worker once to 2.08 (alone: 1.00). The bounds check the pairing (the reference
     # against itself, not against another grid: the one-cell grid below is ~55x), not this machine's
     # timing noise, which a unit test must not depend on.
-    # one Numba thread: the clock is then this thread's CPU time, which the other xdist worker's load
-    # does not inflate (with both threads and wall time it moved the one-cell grid's ratio to 7.8)
-    import numba
     from experiments.core.sweep import REFERENCE, sweep
-    from tracer.measure.timing import set_threads
-    threads = numba.get_num_threads()
-    set_threads(1)
-    try:
-        rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
-        more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
-    finally:
-        set_threads(threads)
+    rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
+    more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
     ref, one = rows
     assert 0.25 < ref["ratio_to_ref"] < 4.0
     assert one["ratio_to_ref"] > 16  # one cell: every ray tests every triangle
