@@ -103,6 +103,43 @@ def test_a_truncated_numba_cache_entry_is_dropped_and_rebuilt(tmp_path):
     assert third.returncode == 0 and "dropped" not in third.stderr
 
 
+@pytest.mark.parametrize("cut", ["truncated", "wrong keys"])
+def test_own_cache_files_cut_short_are_dropped_and_rebuilt(cut, tmp_path, monkeypatch, capsys):
+    """gridcost's own caches (a parsed mesh, an oracle answer): an entry cut short or holding other
+    arrays is dropped with one line naming it, rebuilt, and gives the same answer as before."""
+    import numpy as np
+
+    from tracer.accel.oracle import oracle_cached
+    from tracer.scenes.meshfile import load_mesh
+    from tracer.scenes.rays import make_rays
+    monkeypatch.setenv("GRIDCOST_CACHE", str(tmp_path / "cache"))
+    mesh = tmp_path / "two.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n")
+    scene = load_mesh(mesh)
+    rays = make_rays(scene, "random", 64, seed=1)
+    hits, ties = oracle_cached(scene, rays.origins, rays.directions)
+    entries = sorted((tmp_path / "cache").rglob("*.npz"))
+    assert len(entries) == 2  # the parse and the oracle answer
+    for p in entries:
+        if cut == "truncated":
+            p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+        else:
+            np.savez(p, other=np.zeros(3))
+    capsys.readouterr()
+    again = load_mesh(mesh)
+    hits2, ties2 = oracle_cached(again, rays.origins, rays.directions)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("dropped and rebuilt" in line for line in err), err
+    assert {p.name for p in entries} == {next(p.name for p in entries if p.name in line) for line in err}
+    np.testing.assert_array_equal(again.tris, scene.tris)
+    np.testing.assert_array_equal(hits2.t, hits.t)
+    np.testing.assert_array_equal(hits2.tri_id, hits.tri_id)
+    np.testing.assert_array_equal(ties2, ties)
+    load_mesh(mesh)
+    oracle_cached(again, rays.origins, rays.directions)
+    assert capsys.readouterr().err == ""  # rebuilt: read back silently
+
+
 @pytest.mark.parametrize("content, why", [('{"key": {}, "provenance": {}, "val', "unreadable"),
                                           ('{"garbage": 1}', "not a gridcost point")])
 def test_a_bad_stored_point_is_named_set_aside_and_measured_again(content, why, tmp_path, capsys):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import io
 import os
+import sys
 import tempfile
 from pathlib import Path
 
@@ -66,3 +67,29 @@ def atomic_savez(path, *, strict: bool = False, **arrays) -> Path:
     buf = io.BytesIO()
     np.savez(buf, **arrays)
     return atomic_write(path, buf.getvalue(), strict=strict)
+
+
+def load_cached_npz(path, keys: tuple[str, ...], what: str) -> dict | None:
+    """The arrays ``keys`` of the cache file ``path`` (an ``.npz`` written by :func:`atomic_savez`), or
+    None when it is absent. A file that cannot be read or lacks a key (cut short by a kill before
+    writes were atomic, a full disk, another version) is removed with one line on stderr naming it
+    and ``what`` (e.g. "oracle answer"), and the caller rebuilds it."""
+    import numpy as np
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as z:
+            missing = [k for k in keys if k not in z.files]
+            if missing:
+                raise KeyError(f"no {', '.join(missing)}")
+            return {k: z[k] for k in z.files}
+    except Exception as exc:  # noqa: BLE001 - any unreadable cache entry is dropped and rebuilt
+        print(f"gridcost: the cached {what} {path} is unreadable ({type(exc).__name__}: {exc}); "
+              "dropped and rebuilt", file=sys.stderr)
+        try:
+            path.unlink()
+        except OSError:
+            pass
+        return None

@@ -62,18 +62,15 @@ def oracle_cached(scene, origins, directions, tmin: float = 0.0, tmax=None):
     import numpy as np
 
     from tracer.measure.provenance import kernel_digest
-    from tracer.storage import atomic_savez, cache_root
+    from tracer.storage import atomic_savez, cache_root, load_cached_npz
     o, d = as_rays(origins, directions)
     h = hashlib.sha1(kernel_digest().encode())
     for a in (scene.tris, o, d, tmax_array(tmax, len(o)), np.float64(tmin)):
         h.update(np.ascontiguousarray(a).tobytes())
     path = cache_root() / "oracle" / f"{h.hexdigest()}.npz"
-    if path.exists():
-        try:
-            z = np.load(path)
-            return Hits(z["t"], z["tri_id"]), z["ties"]
-        except (OSError, ValueError, KeyError):  # a corrupt cache entry is recomputed
-            pass
+    z = load_cached_npz(path, ("t", "tri_id", "ties"), "oracle answer")
+    if z is not None:
+        return Hits(z["t"], z["tri_id"]), z["ties"]
     hits, ties = oracle_intersect(scene, o, d, tmin, tmax)
     atomic_savez(path, t=hits.t, tri_id=hits.tri_id, ties=ties)
     return hits, ties

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from tracer.errors import GridcostError
-from tracer.storage import atomic_savez, cache_root  # noqa: F401 (cache_root re-exported)
+from tracer.storage import atomic_savez, cache_root, load_cached_npz  # noqa: F401 (cache_root re-exported)
 from tracer.scenes.scenetype import Scene, validate
 
 FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
@@ -183,15 +183,12 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     name = name or (Path(path.stem).stem if compression else path.stem)
     digest = _sha256(path)
     cfile = cache_root() / f"{digest[:32]}-v{CACHE_VERSION}.npz"
-    if use_cache and cfile.exists():
-        try:
-            z = np.load(cfile)
-            report = {k[2:]: int(z[k]) for k in z.files if k.startswith("r_")}
-            scene = Scene(z["tris"], name, str(path), report)
-            _say_degenerate(path, scene)
-            return scene
-        except Exception:  # a corrupt cache entry is rebuilt
-            pass
+    z = load_cached_npz(cfile, ("tris",), f"parse of {path.name}") if use_cache else None
+    if z is not None:
+        report = {k[2:]: int(z[k]) for k in z if k.startswith("r_")}
+        scene = Scene(z["tris"], name, str(path), report)
+        _say_degenerate(path, scene)
+        return scene
     mesh = _read(path)
     report = {"faces_loaded": int(len(mesh.faces)), "faces_dropped": 0, "strips_decoded": 0}
     faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)

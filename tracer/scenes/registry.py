@@ -43,7 +43,7 @@ import numpy as np
 from tracer.errors import GridcostError
 from tracer.scenes.meshfile import load_mesh
 from tracer.settings import current, run_log
-from tracer.storage import atomic_savez, cache_root
+from tracer.storage import atomic_savez, cache_root, load_cached_npz
 from tracer.scenes.procedural import sphere
 from tracer.scenes.registry_data import (  # the table, re-exported (tracer.scenes.registry.MESHES etc.)
     Source, Mesh, STANFORD_PAGE, BUNNY_TAR, DRAGON_TAR, STANFORD_LICENCE, BUNNY_CREDIT, DRAGON_CREDIT,
@@ -379,12 +379,8 @@ def stand_in(name: str, reason: str | None = None):
     base, path = _stand_in_base(mesh)
     key = f"{STAND_IN_VERSION}|{name}|{mesh.faces}|{base.sha256 if base else 'sphere'}"
     cfile = cache_root() / f"standin-{name}-{hashlib.sha256(key.encode()).hexdigest()[:20]}.npz"
-    tris = None
-    if cfile.exists():
-        try:
-            tris = np.load(cfile)["tris"]
-        except Exception:  # noqa: BLE001 - a corrupt cache entry is rebuilt
-            tris = None
+    z = load_cached_npz(cfile, ("tris",), f"stand-in for {name}")
+    tris = None if z is None else z["tris"]
     if tris is None:
         if base is not None:
             tris = subdivide_to(load_mesh(path, name=base.name).tris, mesh.faces)
