@@ -429,14 +429,35 @@ def _event(text):
         pass
 
 
+def beside_the_box(scene, origins, directions) -> np.ndarray:
+    """The rays of the known bug's exactly axis-parallel form (:data:`REGRESSIONS`): a direction
+    component exactly zero with the origin outside the oracle's hit triangle's bounding box on that
+    axis. Exactly, such a ray cannot meet the triangle; ``ray_triangle``'s float64 rounding still
+    reports the hit when it passes a vertex by less than its rounding (a subnormal here), and a
+    hierarchy's box test, exact in float32, culls it. Returns the mask of such rays."""
+    ref, _ = oracle_intersect(scene, origins, directions)
+    hit = ref.tri_id >= 0
+    tri = scene.tris[np.maximum(ref.tri_id, 0)].astype(np.float64)
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    o = origins.astype(np.float64)
+    out = (directions == 0) & ((o < lo) | (o > hi))
+    return hit & out.any(axis=1)
+
+
 def known_issue(name, scene, case):
     """(skip the variant, mask of the rays compared) for structure ``name`` on this case: the
     inputs of the known bug, for the structures it concerns, and nothing else."""
     keep = np.ones(len(case.origins), bool)
+    if name not in HIERARCHIES:
+        return False, keep
     near = nearly_axis_parallel(case.directions)
-    if near.any() and name in HIERARCHIES:
+    if near.any():
         _event("known bug: nearly axis-parallel rays left out for the hierarchies")
         keep &= ~near
+    beside = beside_the_box(scene, case.origins, case.directions)
+    if beside.any():
+        _event("known bug: axis-parallel rays beside the hit triangle's box left out for the hierarchies")
+        keep &= ~beside
     return False, keep
 
 
@@ -532,7 +553,8 @@ def _agrees(scene, name, params, o, d):
 
 
 _BUG2 = pytest.mark.xfail(strict=True, reason="known bug: kd-tree/BVH/BVH4 miss the oracle's hit of a nearly "
-                                             "axis-parallel ray leaving a node box face or split plane")
+                                             "axis-parallel ray leaving a node box face or split plane, or of an "
+                                             "axis-parallel ray a rounding away from a triangle's box")
 #: the structures of the regression cases, with the parameters the shrunk cases used
 REGRESSION_STRUCTURES = {
     "grid-res": ("grid", dict(res=(2, 2, 1))), "grid-auto": ("grid", {}), "nested": ("nested", dict(levels=2)),
@@ -573,6 +595,12 @@ REGRESSION_STRUCTURES = {
 #:   triangle at the origin; the ray along +x in the plane y = 1 descends at d_y = -1e-30 (resp.
 #:   -1.4e-45): the oracle hits the vertex at t = 2, the kd-tree (every build), BVH and BVH4 miss
 #:   (kd-tree misses for |d_y| from 1e-45 to 1e-17; without the degenerate triangle it agrees).
+#: * "axis-ray-beside-a-subnormal-vertex" (from a shrunk case of the long profile): the same in its
+#:   exactly axis-parallel form (:func:`beside_the_box`). A sliver in the plane z = 0 with its lowest
+#:   vertex at y = 1.1e-44; the ray along +z at x = y = 0 passes it by that subnormal, which
+#:   ``ray_triangle``'s float64 rounding loses beside the 1e-4 edges: the oracle hits at
+#:   t = 2.5e-5; the kd-tree (every build), BVH and BVH4 cull the triangle's box (the grids' margin
+#:   and sorted lists find it).
 _UNIT = np.array([[[0, 0, 0], [1, 0, 0], [0, 0, 1]], [[0, 0.5, 0], [1, 0.5, 0], [0, 0.5, 1]]], np.float32)
 REGRESSIONS = {
     "flat-0.01-square-at-1e3": (
@@ -601,6 +629,10 @@ REGRESSIONS = {
     "subnormal-direction-beyond-float32": (
         np.array([[[1e-4, 0, 0]] * 3] * 6 + [[[0, 0, 0], [0, 1e-4, 0], [0, 0, 1e-4]]], np.float32),
         [[9.999999747378752e-05, 0.0, 0.0]], [[-1.401298464324817e-45, 0.0, 0.0]], {}),
+    "axis-ray-beside-a-subnormal-vertex": (
+        np.array([[[0, 0, 0]] * 3, [[0, 1e-4, 0]] * 3, [[0, 1e-4, 0], [0, 1.1210387714598537e-44, 0], [1e-10, 5e-5, 0]]],
+                 np.float32), [[0.0, 0.0, -2.5000601453939453e-05]], [[0.0, 0.0, 1.0]],
+        {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2, "bvh4": _BUG2}),
     "nearly-parallel-one-triangle": (
         np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), [[1.0, 0.0, -1.0]], [[1e-20, 0.0, 1.0]],
         {"bvh4": _BUG2, "wbvh": _BUG2}),

@@ -21,7 +21,7 @@ Per node (cost terms as :mod:`tracer.accel.kdtree_build`, pbrt-v2 with its empty
 
 Robustness: clipping is Sutherland-Hodgman in float64 on the float32 vertices against the child
 box (inclusive planes); the result is rounded outward to float32 (candidate planes are stored as
-float32) and clamped to the child box, so a reference's bounds always contain the part of its
+float32, after a pad of :data:`CLIP_PAD_REL` of the triangle's magnitude) and clamped to the child box, so a reference's bounds always contain the part of its
 triangle inside the node. A straddler whose clip comes out empty through rounding keeps its old
 bounds cut at the plane (a spare reference, never a lost one). The traversal of
 :mod:`tracer.accel.kdtree` is unchanged and its t-range widening covers the rest, so hits stay
@@ -38,6 +38,12 @@ from tracer.accel.kdtree_build import (_area, _grow, axis_extent, child_probs, c
 
 #: event types, in their sort order at equal positions (Wald & Havran: end < planar < start)
 EV_END, EV_PLANAR, EV_START = 0, 1, 2
+#: outward pad of a clipped extent, relative to the triangle's largest coordinate magnitude, before
+#: it is rounded outward to float32: the float64 clip of a sliver (edge points interpolated through up
+#: to six planes) can land a few float64 ulps inside the true extent, and when that point is itself a
+#: float32 the outward rounding keeps it and the reference's bounds miss the triangle's tip. 2^-32
+#: is ~2^20 float64 ulps, far above that error and far below one float32 ulp (2^-23).
+CLIP_PAD_REL = 2.0 ** -32
 _LOW30 = (1 << 30) - 1
 
 
@@ -123,13 +129,17 @@ def _child_bounds(tv, tri, ob, box, poly, cb, dst, k):
     re-clipped to the child ``box``: outward-rounded float32, clamped to the box and to the
     parent bounds; the parent bounds cut to the box when the clip is empty through rounding."""
     ok = _clip_bounds(tv, tri, box, poly, cb)
+    mag = 0.0
+    for j in range(9):
+        mag = max(mag, abs(np.float64(tv[tri, j])))
+    pad = CLIP_PAD_REL * mag
     for c in range(6):
         old = ob[c]
         if c < 3:
-            v = max(_down32(cb[c]), old) if ok else old
+            v = max(_down32(cb[c] - pad), old) if ok else old
             v = max(v, np.float32(box[c]))
         else:
-            v = min(_up32(cb[c]), old) if ok else old
+            v = min(_up32(cb[c] + pad), old) if ok else old
             v = min(v, np.float32(box[c]))
         dst[6 * k + c] = v
     for c in range(3):  # a degenerate clip (rounding) must not leave lo > hi
