@@ -140,13 +140,24 @@ class Accel:
 
 
 class TreeTraceMixin:
-    """``_trace`` shared by the hierarchies (kd-tree, BVH): same flat arrays, same kernel signature;
-    a subclass sets ``_kernel = staticmethod(<its Numba kernel>)`` and, when its traversal stack
-    holds more than one entry per level, ``_stack_size``."""
+    """``_trace`` shared by the hierarchies (kd-tree, BVH, BVH4, wide BVH): every kernel takes the
+    rays, the root box and diagonal, the structure's flat arrays, the stack size, the outputs and the
+    thread count, in that order. A subclass sets ``_kernel = staticmethod(<its Numba kernel>)`` and
+    overrides :meth:`_tree_arrays` when its arrays differ from the binary BVH's, :meth:`_stack_size`
+    when its stack holds more than one entry per level, and :meth:`_scene_ids` when it stores the
+    triangles in another order."""
 
     def _stack_size(self) -> int:
         """Entries of the per-block traversal stack: one per level of the tree, and a margin."""
         return self.depth_ + 2
+
+    def _tree_arrays(self) -> tuple:
+        """The structure's arrays, as its kernel takes them after ``diag``."""
+        return (self.nodes_.reshape(-1), self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_)
+
+    def _scene_ids(self, out_id):
+        """The kernel's triangle ids as the scene's (the same, unless overridden)."""
+        return out_id
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):
         out_t, out_id, cnt = self._outputs(len(o), count)
@@ -154,10 +165,9 @@ class TreeTraceMixin:
             out_t[:] = np.inf
             out_id[:] = -1
             return out_t, out_id, cnt
-        self._kernel(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                     self.nodes_f_.reshape(-1), self.tri_verts_, self.tri_ids_, self._stack_size(),
+        self._kernel(o, d, tmin, tmax, anyhit, self.box_, self.diag_, *self._tree_arrays(), self._stack_size(),
                      out_t, out_id, cnt, numba.get_num_threads())
-        return out_t, out_id, cnt
+        return out_t, self._scene_ids(out_id), cnt
 
 
 @functools.lru_cache(maxsize=None)

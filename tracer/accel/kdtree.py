@@ -64,7 +64,6 @@ from __future__ import annotations
 import math
 import time
 
-import numba
 import numpy as np
 from llvmlite import ir
 from numba import prange, types
@@ -440,19 +439,13 @@ class KdTree(TreeTraceMixin, Accel):
         self.scene_name_ = scene.name
         return self
 
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        out_t, out_id, cnt = self._outputs(len(o), count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        kd_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.nodes_.reshape(-1),
-                 self.nodes_f_.reshape(-1), self.tri_verts_, self.blocks_.reshape(-1),
-                 self.block_ids_.reshape(-1), self._stack_size(), out_t, out_id, cnt,
-                 numba.get_num_threads())
-        if self.tri_order_ is not None:  # stored (leaf-order) indices -> the scene's; -1 -> -1
-            out_id = self.tri_order_[out_id]
-        return out_t, out_id, cnt
+    def _tree_arrays(self) -> tuple:
+        return (self.nodes_.reshape(-1), self.nodes_f_.reshape(-1), self.tri_verts_, self.blocks_.reshape(-1),
+                self.block_ids_.reshape(-1))
+
+    def _scene_ids(self, out_id):
+        """Stored (leaf-order) indices -> the scene's; -1 -> -1."""
+        return out_id if self.tri_order_ is None else self.tri_order_[out_id]
 
     def stats(self) -> dict:
         nn = self.logical_nodes_

@@ -33,10 +33,9 @@ import time
 import numpy as np
 from numba import prange
 
-from tracer.accel import Accel
+from tracer.accel import Accel, TreeTraceMixin
 from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
-from tracer.accel.bvh import ray_start
-from tracer.accel.bvh import bvh_build
+from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
 from tracer.accel.simd import ctz, popc, slab4, slab8
@@ -355,12 +354,13 @@ def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4, stack_
                        tri, ids4, stack_size, out_t, out_id, counters)
 
 
-class WideBVH(Accel):
+class WideBVH(TreeTraceMixin, Accel):
     """8-wide BVH on AVX2 CPUs, 4-wide elsewhere (``width``: None = :func:`host_width`, or 4 / 8), with
     leaves of up to ``max_leaf`` (4) triangles tested four at a time; ``bins`` (32) and ``trav_cost``
     (relative to one block test, :data:`WIDE_TRAV_COST`) of the binary SAH build it collapses."""
 
     name = "wbvh"
+    _kernel = staticmethod(wide_trace)
     counter_fields = {"setups": "1 if the ray enters the root box", "steps": "leaves visited",
                       "tests": "ray/triangle tests (triangles of the leaves visited)",
                       "nodes": "nodes visited (leaves included)"}
@@ -409,17 +409,9 @@ class WideBVH(Accel):
         """Up to W - 1 pushed children per level, and a margin."""
         return (self.width_ - 1) * (self.depth_ + 1) + 8
 
-    def _trace(self, o, d, tmin, tmax, anyhit, count):
-        import numba
-        out_t, out_id, cnt = self._outputs(len(o), count)
-        if self.n_ == 0:
-            out_t[:] = np.inf
-            out_id[:] = -1
-            return out_t, out_id, cnt
-        wide_trace(o, d, tmin, tmax, anyhit, self.box_, self.diag_, self.width_, self.nodes_.reshape(-1),
-                   self.nodes_.view(np.float32).reshape(-1), self.tri4_.reshape(-1), self.ids4_.reshape(-1),
-                   self._stack_size(), out_t, out_id, cnt, numba.get_num_threads())
-        return out_t, out_id, cnt
+    def _tree_arrays(self) -> tuple:
+        return (self.width_, self.nodes_.reshape(-1), self.nodes_.view(np.float32).reshape(-1),
+                self.tri4_.reshape(-1), self.ids4_.reshape(-1))
 
     def stats(self) -> dict:
         nn = len(self.nodes_)
