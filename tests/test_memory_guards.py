@@ -54,6 +54,17 @@ def test_estimate_within_1_5x_of_the_traced_peak(scenes, name, params):
         assert 1 / 1.5 <= est / peak <= 1.5, f"{name} {params} on {sc}: estimate {est:,} B, traced peak {peak:,} B"
 
 
+def test_nested_estimate_of_long_skinny_triangles():
+    """A capped cylinder's triangles run from cap to cap: under Eq 17's rule (M1 = 4N, sub-grids
+    M2 = (4 N2)^1.5) the estimate spreads their references along them and stays within 1.5x of the
+    traced peak (counting them at their centroids gave 4x)."""
+    scene = load_scene("capped-cylinder-3996")
+    params = {"levels": 2, "m1": 4.0 * scene.n, "m2_factor": 8.0, "m2_rule": "skinny"}
+    est, _ = footprint.estimate("nested", structure_class("nested")(**params), scene)
+    peak = _peak(scene, "nested", params)
+    assert 1 / 1.5 <= est / peak <= 1.5, f"estimate {est:,} B, traced peak {peak:,} B"
+
+
 def test_three_level_nested_estimate(scenes):
     scene = scenes["bunny-69k"]
     est, _ = footprint.estimate("nested", structure_class("nested")(levels=3), scene)
