@@ -88,6 +88,12 @@ def _geometry(tris: np.ndarray, lo: np.ndarray, cell: np.ndarray):
     return area, ext, cen
 
 
+def _bbox_cells(t: np.ndarray, res) -> tuple[np.ndarray, np.ndarray]:
+    """First and last cell (per axis, inclusive, clamped to the grid) of the bounding box of each
+    triangle of ``t`` (triangles in cell units)."""
+    return np.clip(np.floor(t.min(axis=1)), 0, res - 1), np.clip(np.floor(t.max(axis=1)), 0, res - 1)
+
+
 def expected_refs(scene, res, exact: bool = True) -> float:
     """Triangle references of a grid of ``res`` cells over the scene's bounds: with ``exact``
     (triangle/box overlap) the swept-cube volume of each triangle (module docstring), else the
@@ -103,9 +109,7 @@ def expected_refs(scene, res, exact: bool = True) -> float:
             area = 0.5 * np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum(axis=1)
             total += float((area + (t.max(axis=1) - t.min(axis=1)).sum(axis=1) + 1.0).sum())
         else:
-            t = (tris.astype(np.float64) - lo) / cell
-            a = np.clip(np.floor(t.min(axis=1)), 0, res - 1)
-            b = np.clip(np.floor(t.max(axis=1)), 0, res - 1)
+            a, b = _bbox_cells((tris.astype(np.float64) - lo) / cell, res)
             total += float(np.prod(b - a + 1, axis=1).sum())
     return total
 
@@ -154,9 +158,8 @@ def _cell_counts(tris, lo, cell, res, pieces, cen) -> np.ndarray:
     res = np.asarray(res, np.int64)
     diff = np.zeros(tuple(res + 1))
     for s in range(0, len(tris), CELL_CHUNK):
-        t = (tris[s:s + CELL_CHUNK].astype(np.float64) - lo) / cell
-        a = np.clip(np.floor(t.min(axis=1)), 0, res - 1).astype(np.int64)
-        b = np.clip(np.floor(t.max(axis=1)), 0, res - 1).astype(np.int64)
+        a, b = _bbox_cells((tris[s:s + CELL_CHUNK].astype(np.float64) - lo) / cell, res)
+        a, b = a.astype(np.int64), b.astype(np.int64)
         w = pieces[s:s + CELL_CHUNK] / np.prod(b - a + 1, axis=1)
         for corner in range(8):
             idx = tuple(np.where((corner >> k) & 1, b[:, k] + 1, a[:, k]) for k in range(3))
@@ -171,9 +174,9 @@ def _cell_counts(tris, lo, cell, res, pieces, cen) -> np.ndarray:
 
 def _nested(inst, scene) -> int:
     """Level by level (Ize's compact nesting: a sub-grid spans one parent cell): a triangle's cell
-    holds about ``k`` references (the triangles whose centroid shares the top cell, scaled by the
-    level's references per triangle); the sub-grid over that cell has ``_sub_cells(k)`` cells of
-    side h / cells^(1/3); the triangle's references there are its swept-cube volume at that side,
+    holds about ``k`` references (every triangle's expected cells spread over its bounding box,
+    :func:`_cell_counts`, read at the triangle's centroid); the sub-grid over that cell has
+    ``_sub_cells(k)`` cells of side h / cells^(1/3); the triangle's references there are its swept-cube volume at that side,
     plus one per piece the level above cut it into. Below level 2 a cell's references spread over
     the sub-cells a surface crosses (1.5 cells^(2/3) of them). Over :data:`NESTED_SAMPLE` triangles, a
     regular sample of them stands for the whole (sums scaled)."""
