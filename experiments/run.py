@@ -61,6 +61,13 @@ ALL_ORDER = ["derive", "table2", "table3", "table4", "ize-levels", "ize-skinny2"
              "fournier-table1", "advise-check", "scorecard"]
 
 
+#: target -> the targets whose outputs it reads; `all --jobs` starts it only after they have finished
+#: (the scorecard reads every result, so it runs last)
+READS = {"fig2": ("table2", "table3"), "fig1h": ("table1h",), "fig2h": ("table1h",), "selector": ("table1h",),
+         "havran": ("table1h",), "stability": ("exponents",), "predict": ("table2", "table3", "exponents", "fig1h"),
+         "scorecard": tuple(t for t in ALL_ORDER if t != "scorecard")}
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--models", default=None,
                    help="models directory searched first (default: $GRIDCOST_MODELS; then ../shared/models, the "
@@ -95,6 +102,10 @@ def build_parser() -> argparse.ArgumentParser:
         _common(p)
         if modname:
             importlib.import_module(modname).add_arguments(p)
+        else:
+            p.add_argument("--jobs", type=int, default=1,
+                           help="targets run side by side, each in its own process on one core (default 1; at most "
+                                "this host's CPUs): a point two targets need is measured once")
     return parser
 
 
@@ -109,8 +120,12 @@ RANGES = {"seed": (0, None), "repeats": (1, 1000), "rays": (1, 1e10), "side": (1
 def _check_settings(args) -> str | None:
     """The first setting out of its range, as one line (None when all are fine)."""
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    if args.threads is not None and not 1 <= args.threads <= cpus:
-        return f"--threads must be between 1 and {cpus} (this host's CPUs), got {args.threads}"
+    for dest in ("threads", "jobs"):
+        v = getattr(args, dest, None)
+        if v is not None and not 1 <= v <= cpus:
+            return f"--{dest} must be between 1 and {cpus} (this host's CPUs), got {v}"
+    if getattr(args, "jobs", 1) > 1 and (getattr(args, "dask", None) or (args.threads or 1) > 1):
+        return "--jobs runs targets side by side on one core each: not with --dask or --threads above 1"
     for dest, (lo, hi) in RANGES.items():
         v = getattr(args, dest, None)
         if v is None:
@@ -160,10 +175,16 @@ def _run_target(name: str, ctx, args) -> int:
     return rc
 
 
-def _sub_args(name: str, args) -> argparse.Namespace:
+def _sub_argv(name: str, args) -> list[str]:
+    """The command line of one target of `all` (`all`'s flags passed on)."""
     flags = [f for f in ("quick", "force", "reuse_stale", "allow_dirty", "debug") if getattr(args, f, False)]
-    return build_parser().parse_args([name, "--out", args.out] + [f"--{f.replace('_', '-')}" for f in flags]
-                                     + (["--threads", str(args.threads)] if args.threads else []))
+    return ([name, "--out", args.out] + [f"--{f.replace('_', '-')}" for f in flags]
+            + (["--threads", str(args.threads)] if args.threads else [])
+            + (["--models", args.models] if args.models else []))
+
+
+def _sub_args(name: str, args) -> argparse.Namespace:
+    return build_parser().parse_args(_sub_argv(name, args))
 
 
 def _failure(name: str, exc: BaseException, debug: bool) -> int:
@@ -219,6 +240,8 @@ def _run(args, settings) -> int:
         if args.target != "all":
             return _run_target(args.target, ctx, args)
         _refuse_dirty(ctx, args)
+        if args.jobs > 1:
+            return _run_lanes(ctx, args)
         failed = {}
         from experiments.core.common import expected_seconds, overall_progress
         bar = overall_progress(expected_seconds(args.out, ALL_ORDER, args.quick), quiet=getattr(args, "json", False))
@@ -242,6 +265,23 @@ def _run(args, settings) -> int:
     finally:
         if ctx is not None:
             ctx.close()
+
+
+def _run_lanes(ctx, args) -> int:
+    """`all --jobs N`: every target in its own process, N at a time (:mod:`experiments.core.lanes`)."""
+    from experiments.core.common import expected_seconds
+    from experiments.core.lanes import run_lanes
+    from experiments.core.store import write_index
+    status = run_lanes(ALL_ORDER, READS, lambda t: [sys.executable, "-m", "experiments.run", *_sub_argv(t, args)],
+                       args.jobs, expected_seconds(args.out, ALL_ORDER, args.quick))
+    if ctx.out.is_dir():  # the children each rewrote it; once more with every folder in place
+        write_index(ctx.out, ctx.fig_dir)
+    failed = {k: v for k, v in status.items() if v}
+    if failed:
+        print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
+              + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
+        return max(failed.values())
+    return 0
 
 
 def cli() -> None:

@@ -8,6 +8,8 @@ measurement key, and the ledger of who measured the numbers a target writes.
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
 import os
@@ -210,6 +212,21 @@ class PointStore:
         prov = rec.get("provenance") or {}
         return {**{c: prov.get(c) for c in PROVENANCE_COLUMNS}, "stale": bool(rec.get("stale"))}
 
+    @contextlib.contextmanager
+    def claim(self, params: dict):
+        """Hold the point ``params`` while it is looked up, measured and stored: targets that `all
+        --jobs` runs side by side share the store, and one that needs a point another is measuring
+        waits for it and then reads it, so a shared point is measured once (an advisory ``flock`` on
+        ``points/locks/<key>.lock``; the kernel drops it if the holder dies)."""
+        locks = self.dir / "locks"
+        locks.mkdir(parents=True, exist_ok=True)
+        with open(locks / f"{self.key(params)}.lock", "a") as f:
+            fcntl.flock(f, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(f, fcntl.LOCK_UN)
+
     def put(self, params: dict, value, provenance: dict | None = None) -> dict:
         """Store ``value`` measured now (or by ``provenance``, e.g. a Dask worker's host)."""
         k = self.key(params)
@@ -224,13 +241,14 @@ class PointStore:
         """Stored row for ``params``, or ``fn(*args)`` measured now and stored: through the run's
         executor when the store belongs to a run (one task: here, or on one Dask worker; ``fn`` must
         then be a module-level function). Returns (row, was_cached)."""
-        row = self.get(params)
-        if row is not None:
-            return row, True
-        if self.ctx is None:
-            return self.put(params, fn(*args)), False
-        value, prov = self.ctx.run_task(self, fn, *args)
-        return self.put(params, value, provenance=prov), False
+        with self.claim(params):
+            row = self.get(params)
+            if row is not None:
+                return row, True
+            if self.ctx is None:
+                return self.put(params, fn(*args)), False
+            value, prov = self.ctx.run_task(self, fn, *args)
+            return self.put(params, value, provenance=prov), False
 
 
 def _measured_by(folder: Path) -> str:

@@ -22,11 +22,12 @@ def _anchor(store: PointStore, scene, rays_by_kind: dict, rows: list[dict]) -> d
     for worker in sorted({r["worker"] for r in rows}):
         spec = {"reference": list(REFERENCE), "scene": scene.name, "N": scene.n, "worker": worker,
                 "rays": {k: [r.n, r.seed] for k, r in rays_by_kind.items()}}
-        got = store.get(spec)
-        if got is None:
-            got = store.put(spec, {k: float(np.median([r["ref_seconds"] for r in rows
-                                                        if r["worker"] == worker and r["ray_kind"] == k]))
-                                   for k in rays_by_kind})
+        with store.claim(spec):  # the first target to sweep the scene fixes it, also under `all --jobs`
+            got = store.get(spec)
+            if got is None:
+                got = store.put(spec, {k: float(np.median([r["ref_seconds"] for r in rows
+                                                            if r["worker"] == worker and r["ray_kind"] == k]))
+                                       for k in rays_by_kind})
         out[worker] = got
     return out
 
@@ -50,20 +51,19 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
     if specs:
         bar = tqdm(total=len(specs), desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
                    disable=None, dynamic_ncols=True)
-        mine = store.measurement_key
         executor = ctx.executor if ctx is not None else LocalExecutor()
-        for spec, rows in executor.map(specs, scenes={scene.name: scene}):
-            theirs = rows[0].pop("key") if rows else mine
-            for r in rows[1:]:
-                r.pop("key", None)
-            if theirs != mine:
-                from tracer.errors import GridcostError
-                raise GridcostError(f"worker {rows[0]['worker']} measured with another measurement key "
-                                    f"({theirs}) than this run ({mine}): same code, threads, clock and CPU needed")
-            spec = {k: v for k, v in spec.items() if k not in ("code", "threads")}
-            store.put(spec, {"rows": rows}, provenance={"host": rows[0]["worker"], "clock": rows[0]["clock"]}
-                      if rows else None)
-            bar.update(1)
+        if isinstance(executor, LocalExecutor):  # one point at a time, held while measured (`all --jobs`)
+            for spec in specs:
+                key = _stored_spec(spec)
+                with store.claim(key):
+                    if store.get(key) is None:
+                        for got in executor.map([spec], scenes={scene.name: scene}):
+                            _put_rows(store, *got)
+                bar.update(1)
+        else:  # Dask: every point at once, stored as it completes
+            for got in executor.map(specs, scenes={scene.name: scene}):
+                _put_rows(store, *got)
+                bar.update(1)
         bar.close()
     out = []
     for spec in keys:
@@ -74,6 +74,25 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
         r["anchored_seconds"] = r["ratio_to_ref"] * anchor[r["worker"]][r["ray_kind"]]
         r["anchored_ns_per_ray"] = r["anchored_seconds"] / r["rays"] * 1e9
     return out
+
+
+def _stored_spec(spec: dict) -> dict:
+    """A point's spec as stored (without what the task carries to the worker)."""
+    return {k: v for k, v in spec.items() if k not in ("code", "threads")}
+
+
+def _put_rows(store: PointStore, spec: dict, rows: list[dict]) -> None:
+    """Store a measured point's rows, refusing rows measured under another measurement key."""
+    mine = store.measurement_key
+    theirs = rows[0].pop("key") if rows else mine
+    for r in rows[1:]:
+        r.pop("key", None)
+    if theirs != mine:
+        from tracer.errors import GridcostError
+        raise GridcostError(f"worker {rows[0]['worker']} measured with another measurement key "
+                            f"({theirs}) than this run ({mine}): same code, threads, clock and CPU needed")
+    store.put(_stored_spec(spec), {"rows": rows},
+              provenance={"host": rows[0]["worker"], "clock": rows[0]["clock"]} if rows else None)
 
 
 def grid_cells(scene, factors) -> list[dict]:
@@ -159,7 +178,6 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     like a sweep point (resumable). ``others`` (name -> (structure, parameters), e.g. the best
     one-level grid) are timed in the same rounds but are not candidates for the best; ``speedup``
     holds each target's median per-round speed-up over each of them."""
-    from tracer.measure.timing import paired_ratio
     rounds, repeats, timing = _paired_budget(quick)
     points = []
     for p in list(targets.values()) + list(candidates):
@@ -168,9 +186,15 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     spec = {"paired": 1, "scene": scene.name, "N": scene.n, "structure": structure, "targets": targets,
             "points": points, "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats,
             **timing, **({"others": others} if others else {})}
-    done = store.get(spec)
-    if done is not None:
-        return done
+    with store.claim(spec):
+        done = store.get(spec)
+        return done if done is not None else _paired_penalties(scene, structure, targets, points, rays, store, spec,
+                                                               rounds, repeats, timing, others)
+
+
+def _paired_penalties(scene, structure, targets, points, rays, store, spec, rounds, repeats, timing, others):
+    """:func:`paired_penalties` measured now and stored."""
+    from tracer.measure.timing import paired_ratio
     adapt = ([points.index(p) for p in targets.values()], timing["max_rounds"], timing["half_width_pct"]) \
         if "max_rounds" in timing else None
     tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others,
@@ -226,13 +250,14 @@ def paired_plane(scene, structure: str, points: list[dict], rays, store: PointSt
     timing = {k: v for k, v in timing.items() if k == "min_sample"}  # a plane is timed in fixed rounds
     spec = {"paired_plane": 1, "scene": scene.name, "N": scene.n, "structure": structure, "points": points,
             "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats, **timing}
-    done = store.get(spec)
-    if done is None:
-        tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, None,
-                        timing.get("min_sample"))
-        t = np.array([tp[i] for i in range(len(points))])  # (points, rounds)
-        done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()},
-                         provenance=prov)
+    with store.claim(spec):
+        done = store.get(spec)
+        if done is None:
+            tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, None,
+                            timing.get("min_sample"))
+            t = np.array([tp[i] for i in range(len(points))])  # (points, rounds)
+            done = store.put(spec, {"pct_over_best": (100 * (np.median(t / t.min(axis=0), axis=1) - 1)).tolist()},
+                             provenance=prov)
     return np.asarray(done["pct_over_best"])
 
 

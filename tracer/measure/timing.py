@@ -126,27 +126,36 @@ def _count_timing() -> None:
 
 
 def time_call(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
-              min_sample: float = MIN_SAMPLE_SECONDS, clock: Callable[[], float] | None = None) -> Timing:
+              min_sample: float = MIN_SAMPLE_SECONDS, clock: Callable[[], float] | None = None,
+              number: int | None = None) -> Timing:
     """Call ``fn`` ``warmup`` times untimed (JIT compilation, caches), then take ``repeats`` samples;
     a sample runs ``fn`` back to back until it lasts ``min_sample`` seconds and is reported per call.
-    ``clock`` defaults to :func:`default_clock`."""
+    ``clock`` defaults to :func:`default_clock`; ``number`` (calls per sample, from
+    :func:`calls_per_sample`) skips the calibration call."""
     _count_timing()
-    runs = sample_calls(fn, repeats, warmup, min_sample, clock)
+    runs = sample_calls(fn, repeats, warmup, min_sample, clock, number)
     return Timing(float(np.median(runs)), float(min(runs)), float(max(runs)), runs)
 
 
+def calls_per_sample(once: float, min_sample: float = MIN_SAMPLE_SECONDS) -> int:
+    """Back-to-back calls that make a sample of at least ``min_sample`` seconds, for a call that took
+    ``once`` seconds."""
+    return max(1, int(np.ceil(min_sample / max(once, 1e-9)))) if once < min_sample else 1
+
+
 def sample_calls(fn: Callable[[], object], repeats: int = 5, warmup: int = 1,
-                 min_sample: float = MIN_SAMPLE_SECONDS, clock: Callable[[], float] | None = None) -> list[float]:
+                 min_sample: float = MIN_SAMPLE_SECONDS, clock: Callable[[], float] | None = None,
+                 number: int | None = None) -> list[float]:
     """:func:`time_call`'s samples (seconds per call), without counting as a timing of the run
     (the timing-noise meter, ``experiments.core.noise``, uses it so a file drawn from stored points
     is still told apart from one measured now)."""
     clock = clock or default_clock()
     for _ in range(warmup):
         fn()
-    t0 = clock()
-    fn()
-    once = clock() - t0
-    number = max(1, int(np.ceil(min_sample / max(once, 1e-9)))) if once < min_sample else 1
+    if number is None:
+        t0 = clock()
+        fn()
+        number = calls_per_sample(clock() - t0, min_sample)
     runs = []
     for _ in range(max(1, repeats)):
         t0 = clock()
@@ -195,14 +204,20 @@ def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[]
     (:func:`paired_ratio`), not by ratios of separately taken medians. After ``rounds`` rounds,
     one more round is timed while ``more(times so far)`` is true, up to ``max_rounds`` in all."""
     out = {k: [] for k in fns}
-    for fn in fns.values():
-        fn()  # warm-up (JIT compilation, caches) before the first round
+    clock = clock or default_clock()
+    number = {}
+    for k, fn in fns.items():  # the warm-up (JIT compilation, caches), timed to size every round's samples
+        fn()
+        t0 = clock()
+        fn()
+        number[k] = calls_per_sample(clock() - t0, min_sample)
     limit = max(1, rounds) if more is None else max(1, rounds, max_rounds or 0)
     for r in range(limit):
         if r >= max(1, rounds) and not more(out):
             break
         for k, fn in fns.items():
-            out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock, min_sample=min_sample).median)
+            out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock, min_sample=min_sample,
+                                    number=number[k]).median)
     return out
 
 
