@@ -14,6 +14,7 @@ Numba at that folder at decoration time (when Numba picks a function's cache loc
 import os
 import sys
 
+import numpy as np
 from numba import config, njit
 from numba.core import caching
 
@@ -89,6 +90,20 @@ BLOCK = 256
 def nblocks(m):
     """Number of BLOCK-ray blocks covering m rays."""
     return (m + BLOCK - 1) // BLOCK
+
+
+@jit(inline="always")
+def pop_within(st, sp, lim):
+    """The pop of every stack traversal (BVH, BVH4, wide BVH, kd-tree): the index of the topmost of the
+    ``sp`` pending entries whose entry distance ``st`` is not beyond ``lim`` (the closest hit so far,
+    plus the tolerance where the kernel widens it), or -1 when none is. The entries above it start
+    after the closest hit and are dropped, not a stop: the stacks are not ordered by entry distance.
+    The new stack height is the index. ``not lim < st`` keeps an entry whose distance is NaN."""
+    while sp > 0:
+        sp -= 1
+        if not lim < st[np.uintp(sp)]:
+            return sp
+    return -1
 
 
 @jit(inline="always")

@@ -33,7 +33,7 @@ import time
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
@@ -311,14 +311,10 @@ def bvh_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, stac
                     else:
                         node = -1
                 if node < 0:  # pop the nearest pending node that may still hold a closer hit
-                    while sp > 0:
-                        sp -= 1
-                        spu = np.uintp(sp)
-                        if st[spu] <= best + tol:
-                            node = sn[spu]
-                            break
-                    if node < 0:
+                    sp = pop_within(st, sp, best + tol)
+                    if sp < 0:
                         break
+                    node = sn[np.uintp(sp)]
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 

@@ -35,7 +35,7 @@ import time
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import Accel, TreeTraceMixin
 from tracer.accel.bvh import BVH, BVH_TRAV_COST, ray_start
 from tracer.accel.geometry import INF, ray_triangle, t_tolerance
@@ -239,15 +239,12 @@ def bvh4_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, ni, nf, tv, ids, sta
                         ref = sn[spu]
                         cnt = sc[spu]
                 if ref < 0:  # pop the nearest pending entry that may still hold a closer hit
-                    while sp > 0:
-                        sp -= 1
-                        spu = np.uintp(sp)
-                        if st[spu] <= best + tol:
-                            ref = sn[spu]
-                            cnt = sc[spu]
-                            break
-                    if ref < 0:
+                    sp = pop_within(st, sp, best + tol)
+                    if sp < 0:
                         break
+                    spu = np.uintp(sp)
+                    ref = sn[spu]
+                    cnt = sc[spu]
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 

@@ -70,7 +70,7 @@ from numba import prange, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.accel.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
@@ -264,17 +264,13 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, bl
                 # (d == 0, o == split) pushes the above child with the parent's whole range,
                 # under the entries the below child's subtree pushes later with larger entry t;
                 # and tol lets a child's entry t exceed its sibling's.
-                node = -2
-                while sp > 0:
-                    sp -= 1
-                    spu = np.uintp(sp)
-                    ntmin = s0[spu]
-                    if not best < ntmin:
-                        node = sn[spu]
-                        ntmax = s1[spu]
-                        break
-                if node == -2:
+                sp = pop_within(s0, sp, best)
+                if sp < 0:
                     break
+                spu = np.uintp(sp)
+                node = sn[spu]
+                ntmin = s0[spu]
+                ntmax = s1[spu]
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 

@@ -34,7 +34,7 @@ import numpy as np
 from numba import prange
 
 from tracer.accel import Accel, TreeTraceMixin
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
@@ -328,15 +328,10 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4
                             c = sc[np.uintp(top)]
                             sp = top
                 if not found:  # pop the nearest pending entry that may still hold a closer hit
-                    while sp > 0:
-                        sp -= 1
-                        spu = np.uintp(sp)
-                        if st[spu] <= best + tol:
-                            c = sc[spu]
-                            found = True
-                            break
-                    if not found:
+                    sp = pop_within(st, sp, best + tol)
+                    if sp < 0:
                         break
+                    c = sc[np.uintp(sp)]
         store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
                   leaves, tests, nvis, 0)
 
