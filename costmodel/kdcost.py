@@ -161,3 +161,29 @@ def fit_bvh_trav_cost(points, strict: bool = False) -> BvhSahFit:
     :data:`BVH_SETTINGS` on :data:`BVH_CALIBRATION`); ``strict``: raise rather than fall back to the
     default weight when no ray kind fits."""
     return BvhSahFit(strict=strict).fit(list(points))
+
+
+class WorkCostFit:
+    """Where a structure's time per ray goes: T/ray = c_ray + c_step steps + c_test tests, non-negative
+    least squares on relative residuals (weights 1/T), over groups of rays that differ in counted work
+    (``experiments.tools.bench`` times them). ``steps`` is the structure's traversal unit: nodes
+    visited for a tree, cells for a grid. Fitted: ``c_ray_``, ``c_step_``, ``c_test_`` (in the unit of
+    ``y``, ns), ``mape_``, ``r2_``."""
+
+    def fit(self, X, y):
+        X = np.asarray(X, float).reshape(-1, 2)
+        y = np.asarray(y, float)
+        A = np.column_stack([np.ones(len(X)), X])
+        coef, _ = nnls(A / y[:, None], np.ones(len(y)))
+        self.c_ray_, self.c_step_, self.c_test_ = (float(c) for c in coef)
+        self.coef_ = coef
+        m = _metrics(y, A @ coef)
+        self.mape_, self.r2_ = m["mape"], m.get("r2", float("nan"))
+        return self
+
+    def predict(self, X):
+        return np.column_stack([np.ones(len(X)), np.asarray(X, float).reshape(-1, 2)]) @ self.coef_
+
+    def summary(self) -> dict:
+        return {"c_ray_ns": self.c_ray_, "c_step_ns": self.c_step_, "c_test_ns": self.c_test_, "mape": self.mape_,
+                "r2": self.r2_}

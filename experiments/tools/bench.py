@@ -191,7 +191,54 @@ def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0,
             if isinstance(p, dict) and f"{kind}_per_ray" in row:
                 p["nodes_per_ray"] = row[f"{kind}_per_ray"]["nodes"]
                 p["tests_per_ray"] = row[f"{kind}_per_ray"]["tests"]
+    if threads == 1:
+        out["work_costs"] = _where_time_goes(rays, {k: v for k, v in kept.items() if k != "embree"}, log)
     out["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    return out
+
+
+#: ray groups of different counted work that a structure's time per ray is fitted over
+WORK_GROUPS = 8
+#: structures whose traversal step is a cell (``steps``), not a node (``nodes``)
+GRID_LIKE = ("grid", "nested", "cgt", "sortedlists")
+
+
+def _structure(name: str) -> str:
+    """The structure a bench name builds (a variant's, or the name itself)."""
+    return VARIANTS.get(name, (name, {}))[0]
+
+
+def _where_time_goes(rays, accels, log, rounds: int = 5) -> dict:
+    """Per structure and ray kind: its time per ray split into a cost per ray, per traversal step
+    (node for a tree, cell for a grid) and per triangle test (:class:`costmodel.kdcost.WorkCostFit`),
+    fitted over :data:`WORK_GROUPS` groups of the rays sorted by their counted work (steps + tests), the
+    groups timed in interleaved rounds; and the structure's working set (its arrays, ``memory_bytes``)
+    beside this host's L2 and L3 (:func:`tracer.measure.memory.cache_bytes`): a gap to Embree paid per step
+    or per test with the working set in L2 is arithmetic, with it beyond L3 it is memory."""
+    import numpy as np
+
+    from costmodel.kdcost import WorkCostFit
+    from tracer.measure.memory import cache_bytes
+    from tracer.measure.timing import time_paired
+    out = {}
+    for name, a in accels.items():
+        ws = int(a.stats().get("memory_bytes") or 0)
+        rec = {"working_set_bytes": ws, "l2_bytes": cache_bytes(2), "l3_bytes": cache_bytes(3)}
+        for kind, r in rays.items():
+            _, cnt = a.intersect(r.origins, r.directions, counters=True)
+            unit = "steps" if _structure(name) in GRID_LIKE else "nodes"
+            steps, tests = np.asarray(cnt[unit], float), np.asarray(cnt["tests"], float)
+            groups = np.array_split(np.argsort(steps + tests, kind="stable"), WORK_GROUPS)
+            sub = [(np.ascontiguousarray(r.origins[g]), np.ascontiguousarray(r.directions[g])) for g in groups]
+            tp = time_paired({i: (lambda o=o, d=d: a.intersect(o, d, counters=False)) for i, (o, d) in enumerate(sub)},
+                             rounds=rounds, repeats=1)
+            y = [float(np.median(tp[i])) / len(g) * 1e9 for i, g in enumerate(groups)]
+            X = [(steps[g].mean(), tests[g].mean()) for g in groups]
+            fit = WorkCostFit().fit(X, y)
+            rec[kind] = {"unit": unit, **fit.summary(), "groups": WORK_GROUPS, "rounds": rounds}
+            log(f"  {name:13s} {kind:7s} {fit.c_ray_:6.1f} ns/ray + {fit.c_step_:5.2f} ns/{unit[:-1]} + "
+                f"{fit.c_test_:5.2f} ns/test (MAPE {fit.mape_:.1f} %)")
+        out[name] = rec
     return out
 
 
@@ -307,6 +354,23 @@ def _summary(out: dict) -> str:
             for k, kind, p in work:
                 lines.append(f"| {k.split('/')[0]} | {kind} | {p['ns_per_ray']:.0f} | {p['embree_ns_per_ray']:.0f} | "
                              f"{p.get('nodes_per_ray', float('nan')):.2f} | {p.get('tests_per_ray', float('nan')):.2f} |")
+    costs = out.get("work_costs")
+    if costs:
+        l2, l3 = (next(iter(costs.values()))[k] for k in ("l2_bytes", "l3_bytes"))
+        lines += ["", f"Where the time goes: each structure's time per ray fitted as c_ray + c_step x steps + c_test x tests "
+                      f"(non-negative least squares) over {WORK_GROUPS} groups of the rays sorted by counted work, timed in "
+                      f"interleaved rounds (steps: nodes for a tree, cells for a grid); working set = the structure's "
+                      f"arrays against this host's L2 ({l2 / 2**20:.1f} MiB) and L3 ({l3 / 2**20:.0f} MiB).", "",
+                  "| structure | rays | ns/ray | ns/step | ns/test | MAPE % | working set (MiB) | fits in |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for name, rec in costs.items():
+            ws = rec["working_set_bytes"]
+            where = "L2" if ws <= l2 else ("L3" if ws <= l3 else "memory")
+            for kind in ("random", "camera"):
+                if kind in rec:
+                    c = rec[kind]
+                    lines.append(f"| {name} | {kind} | {c['c_ray_ns']:.1f} | {c['c_step_ns']:.2f} ({c['unit']}) | "
+                                 f"{c['c_test_ns']:.2f} | {c['mape']:.1f} | {ws / 2**20:.1f} | {where} |")
     fit = out.get("bvh_sah_fit")
     if fit:
         lines += ["", f"bvh4-sah-fit: the BVH4 built with the SAH traversal weight C_trav/C_isect = {fit['trav_cost']:.3f} "
