@@ -186,3 +186,38 @@ def test_hapala_rc_split_recovers_a_paper_made_from_our_counters():
     assert (d["rc_ours"] > d["rc_margin"]).all()  # the dearer node alone already lowers R_C
     # rho from a time ratio, by hand: t_H/t_G = 0.5, work_G = 10 + 4*8 = 42, tests_H = 3, trav = 18
     assert node_step_ratio(0.5, 10, 8, 18, 3) == pytest.approx((0.5 * 42 - 12) / 18)
+
+
+def test_work_cost_fit_recovers_per_ray_step_and_test_costs():
+    """bench's split of time per ray: groups whose steps and tests vary apart give back the constants
+    they were made with, and the summary carries them."""
+    from costmodel.kdcost import WorkCostFit
+    X = np.array([[2, 1], [5, 1], [9, 3], [14, 2], [20, 6], [26, 4], [33, 9], [40, 7]], float)
+    y = 10.0 + 5.0 * X[:, 0] + 8.0 * X[:, 1]
+    fit = WorkCostFit().fit(X, y)
+    assert (fit.c_ray_, fit.c_step_, fit.c_test_) == pytest.approx((10.0, 5.0, 8.0), rel=1e-6)
+    assert fit.mape_ < 1e-6 and fit.summary()["c_test_ns"] == pytest.approx(8.0)
+    noisy = y * (1 + 0.02 * np.cos(np.arange(len(y))))
+    assert WorkCostFit().fit(X, noisy).c_step_ == pytest.approx(5.0, rel=0.15)
+
+
+def test_bench_splits_each_paired_structure_s_time_into_ray_step_and_test_costs():
+    """bench at one thread: per paired structure and ray kind the fitted costs, which predict its
+    measured time per ray, and the working set beside the host's caches, rendered in summary.md."""
+    from experiments.tools.bench import _summary, run_bench
+    scene = load_scene("bunny-948")
+    out = run_bench(scene, ["grid", "wbvh"], 4000, 1, 1, log=lambda *a: None)
+    costs = out["work_costs"]
+    assert set(costs) == {"grid", "wbvh"}
+    assert costs["grid"]["random"]["unit"] == "steps" and costs["wbvh"]["camera"]["unit"] == "nodes"
+    for name, rec in costs.items():
+        assert rec["working_set_bytes"] == out["structures"][name]["stats"]["memory_bytes"] > 0
+        for kind in ("random", "camera"):
+            c = rec[kind]
+            assert min(c["c_ray_ns"], c["c_step_ns"], c["c_test_ns"]) >= 0 and c["mape"] < 50
+            per_ray = out["structures"][name][f"{kind}_per_ray"]
+            unit = per_ray[c["unit"]]
+            model = c["c_ray_ns"] + c["c_step_ns"] * unit + c["c_test_ns"] * per_ray["tests"]
+            measured = 1e3 / out["structures"][name][f"{kind}_mrays"]
+            assert 0.4 < model / measured < 2.5
+    assert "Where the time goes" in _summary(out)
