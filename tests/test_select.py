@@ -201,7 +201,9 @@ def test_selector_on_real_scenes(spd_calibration, load):
     nothing from the calibration scenes but their build and per-ray times, whichever structure won
     there (on these small SPD scenes our grid and kd-tree are close per ray)."""
     cal = spd_calibration
-    assert (cal.kind == "path").all() and (cal.T_BH > cal.T_BG).all() and (cal.t_RH > 0).all()
+    # build times only positive: on 256-482 triangles both builds are fixed costs of under a
+    # millisecond, and which is faster is timing noise (a unit test asserts no speed)
+    assert (cal.kind == "path").all() and (cal.T_BH > 0).all() and (cal.T_BG > 0).all() and (cal.t_RH > 0).all()
     sel = Selector(HapalaEstimator(), kind="path", sample_rays=500).fit(cal)
     big = decide(sel, load("teapot-in-stadium"), 1e9)
     assert big["choice"] == "kdtree" and big["rc_est"] < 1e9 and big["t_hier"] < big["t_grid"] / 10, big

@@ -52,17 +52,18 @@ def sweep(scene, structure: str, param_list: list[dict], rays_by_kind: dict, sto
         bar = tqdm(total=len(specs), desc=desc or f"{scene.name} {structure}", unit="pt", leave=False,
                    disable=None, dynamic_ncols=True)
         executor = ctx.executor if ctx is not None else LocalExecutor()
+        mine = store.measurement_key  # this run's, read before any task runs (an in-process worker sets its own)
         if isinstance(executor, LocalExecutor):  # one point at a time, held while measured (`all --jobs`)
             for spec in specs:
                 key = _stored_spec(spec)
                 with store.claim(key):
                     if store.get(key) is None:
                         for got in executor.map([spec], scenes={scene.name: scene}):
-                            _put_rows(store, *got)
+                            _put_rows(store, mine, *got)
                 bar.update(1)
         else:  # Dask: every point at once, stored as it completes
             for got in executor.map(specs, scenes={scene.name: scene}):
-                _put_rows(store, *got)
+                _put_rows(store, mine, *got)
                 bar.update(1)
         bar.close()
     out = []
@@ -81,9 +82,9 @@ def _stored_spec(spec: dict) -> dict:
     return {k: v for k, v in spec.items() if k not in ("code", "threads")}
 
 
-def _put_rows(store: PointStore, spec: dict, rows: list[dict]) -> None:
-    """Store a measured point's rows, refusing rows measured under another measurement key."""
-    mine = store.measurement_key
+def _put_rows(store: PointStore, mine: dict, spec: dict, rows: list[dict]) -> None:
+    """Store a measured point's rows, refusing rows measured under another measurement key than
+    ``mine`` (the run's)."""
     theirs = rows[0].pop("key") if rows else mine
     for r in rows[1:]:
         r.pop("key", None)
