@@ -201,7 +201,7 @@ def test_work_cost_fit_recovers_per_ray_step_and_test_costs():
     assert WorkCostFit().fit(X, noisy).c_step_ == pytest.approx(5.0, rel=0.15)
 
 
-def test_bench_splits_each_paired_structure_s_time_into_ray_step_and_test_costs():
+def test_bench_splits_each_paired_structure_s_time_into_ray_step_and_test_costs(one_numba_thread):
     """bench at one thread: per paired structure and ray kind the fitted costs, which predict its
     measured time per ray, and the working set beside the host's caches, rendered in summary.md."""
     from experiments.tools.bench import _summary, run_bench

@@ -51,8 +51,12 @@ def _kill_a_busy_worker(client, stop: threading.Event) -> list[int]:
 
 
 def _sweep(executor, tmp_path, scene, rays):
+    """The sweep as `run.main` runs it with --dask: the client on the wall clock its workers time with
+    (whatever Numba thread count an earlier test of this process left)."""
+    from tracer.settings import current, use
     store = PointStore(tmp_path, ctx=SimpleNamespace(quick=True, executor=executor))
-    return store, sweep(scene, "grid", PARAMS, rays, store, repeats=1)
+    with use(current().replace(clock="wall")):
+        return store, sweep(scene, "grid", PARAMS, rays, store, repeats=1)
 
 
 def test_a_killed_worker_does_not_lose_the_sweep(cluster, tmp_path):
