@@ -26,6 +26,13 @@ DEFAULT_SETTINGS = ({}, {"max_depth": 16}, {"clip": True}, {"clip": True, "max_d
 COLUMNS = ("nodes", "leaves", "tests")
 
 
+def relative_nnls(A, y) -> np.ndarray:
+    """Non-negative least squares of ``A @ c = y`` on relative residuals (each row divided by its
+    ``y``), so a slow point weighs no more than a fast one: the fit of :class:`BvhSahFit` and
+    :class:`WorkCostFit`."""
+    return nnls(np.asarray(A, float) / np.asarray(y, float)[:, None], np.ones(len(y)))[0]
+
+
 def kd_time_per_ray(nodes, leaves, tests, c_node, c_leaf, c_test, c_0=0.0):
     """Kd-tree traversal cost per ray: T = c_node * nodes + c_leaf * leaves + c_test * tests + c_0,
     nodes / leaves / tests the per-ray means of the ``nodes``, ``steps`` and ``tests`` counters."""
@@ -115,7 +122,7 @@ class BvhSahFit:
             pk = [p for p in points if p["kind"] == kind]
             A = np.array([[p["nodes"], p["tests"]] for p in pk], float)
             y = np.array([p["s_per_ray"] for p in pk]) * 1e9
-            (cn, ct), _ = nnls(A / y[:, None], np.ones(len(y)))
+            cn, ct = relative_nnls(A, y)
             if not (cn > 1e-6 * ct and ct > 1e-6 * cn):  # a cost a millionth of the other's is none
                 self.free_[kind] = (float(cn), float(ct))
                 continue
@@ -174,7 +181,7 @@ class WorkCostFit:
         X = np.asarray(X, float).reshape(-1, 2)
         y = np.asarray(y, float)
         A = np.column_stack([np.ones(len(X)), X])
-        coef, _ = nnls(A / y[:, None], np.ones(len(y)))
+        coef = relative_nnls(A, y)
         self.c_ray_, self.c_step_, self.c_test_ = (float(c) for c in coef)
         self.coef_ = coef
         m = _metrics(y, A @ coef)

@@ -255,11 +255,7 @@ def _run(args, settings) -> int:
                 failed[name] = _failure(name, exc, args.debug)
             bar.advance(name, ALL_ORDER[i + 1] if i + 1 < len(ALL_ORDER) else None)
         bar.close()
-        if failed:
-            print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
-                  + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
-            return max(failed.values())
-        return 0
+        return _all_status(failed)
     except Exception as exc:
         return _failure(args.target, exc, args.debug)
     finally:
@@ -276,12 +272,16 @@ def _run_lanes(ctx, args) -> int:
                        args.jobs, expected_seconds(args.out, ALL_ORDER, args.quick))
     if ctx.out.is_dir():  # the children each rewrote it; once more with every folder in place
         write_index(ctx.out, ctx.fig_dir)
-    failed = {k: v for k, v in status.items() if v}
-    if failed:
-        print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
-              + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
-        return max(failed.values())
-    return 0
+    return _all_status({k: v for k, v in status.items() if v})
+
+
+def _all_status(failed: dict) -> int:
+    """`all`'s exit status: 0, or the worst of the failed targets' after one line naming them."""
+    if not failed:
+        return 0
+    print(f"all: {len(failed)} of {len(ALL_ORDER)} targets failed: "
+          + ", ".join(f"{k} (exit {v})" for k, v in failed.items()), file=sys.stderr)
+    return max(failed.values())
 
 
 def cli() -> None:

@@ -79,3 +79,13 @@ def test_jobs_out_of_range_or_with_threads_is_refused(argv, says, capsys, tmp_pa
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "r").exists()
+
+
+def test_what_a_target_reads_is_a_target_of_all_that_runs_before_it():
+    """`all --jobs` orders targets by READS alone: every name there is in ALL_ORDER, before its reader
+    (the serial order, which the targets were written against, agrees)."""
+    from experiments.run import ALL_ORDER, READS
+    for target, reads in READS.items():
+        assert target in ALL_ORDER
+        for r in reads:
+            assert ALL_ORDER.index(r) < ALL_ORDER.index(target), (target, r)
