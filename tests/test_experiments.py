@@ -285,3 +285,25 @@ def test_paired_rounds_are_added_until_the_penalty_is_known():
     assert len(out["a"]) == len(out["b"]) == 5
     assert len(time_paired(fns, rounds=3, repeats=1, min_sample=0.0, more=lambda t: True, max_rounds=9)["a"]) == 9
     assert len(time_paired(fns, rounds=3, repeats=1, min_sample=0.0)["a"]) == 3
+    # a round may time only some: "b" drops out after round 3, for good (never re-added)
+    ask = iter([{"a"}, {"a", "b"}, {"a", "b"}, set()])
+    out = time_paired(fns, rounds=3, repeats=1, min_sample=0.0, more=lambda t: next(ask), max_rounds=9)
+    assert len(out["a"]) == 6 and len(out["b"]) == 3
+
+
+def test_unsettled_keeps_timing_the_targets_the_two_fastest_and_the_others():
+    """Past the first rounds only what narrows a target's interval is timed again: a slow
+    candidate drops out; the ratio of two points uses the rounds both were timed in."""
+    from experiments.core.sweep import _unsettled, penalty_ci
+    from tracer.measure.timing import paired_ratio
+    rng = np.random.default_rng(1)
+    noisy = {i: list(base + 0.2 * rng.random(11)) for i, base in enumerate((1.0, 1.1, 1.5, 2.0))}
+    noisy["one_level"] = list(3.0 + 0.2 * rng.random(11))
+    assert _unsettled([1], 2.0)(noisy) == {0, 1, "one_level"}      # point 2 and 3 drop out
+    assert _unsettled([3], 2.0)(noisy) == {0, 1, 3, "one_level"}
+    noisy[1] += [1.1] * 4                                            # 1 timed 4 rounds longer than 2
+    noisy[0] += [1.0] * 4
+    assert _unsettled([1], 2.0)(noisy) == {0, 1, "one_level"}
+    r = np.asarray(noisy[2]) / np.asarray(noisy[0][:11])
+    assert paired_ratio(noisy, 2, 0) == (float(np.median(r)), float(r.min()), float(r.max()))
+    assert penalty_ci(noisy, 2, 0) == penalty_ci({2: noisy[2], 0: noisy[0][:11]}, 2, 0)

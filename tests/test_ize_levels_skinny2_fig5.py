@@ -81,6 +81,9 @@ def test_fig5_one_plane_per_scene_and_kind(out):
         assert (g.interior == inside).all() and (g.widened == size["widened"]).all()
         assert (g.pct_over_best_sweep >= 0).all() and g.pct_over_best_sweep.min() == 0
         assert g.memory_pick.sum() == 1  # one memory-aware point per plane
+        # a widened plane's ring was timed in its widening; the first 3 x 3 points in widening 0
+        assert set(g.paired_in_widening) == set(range(size["widened"] + 1))
+        assert (g.paired_in_widening == 0).sum() == 9
     assert set(df.model_kind) == {"compact", "skinny"}
     assert meta["kinds"] == ["random", "camera"]
     assert (out / "paper_figs" / "fig5.png").stat().st_size > 1000
@@ -94,3 +97,15 @@ def test_fig5_plane_widens_toward_an_edge_optimum():
     g1, g2 = widen(c1, c2, [(2.5, 2.0), (1.5, 1.0)])                 # right edge in c1, bottom edge in c2
     assert g1 == [1.0, 1.5, 2.5, round(2.5 * 2.5 / 1.5, 4)] and g2 == [0.5, 1.0, 2.0, 3.0]
     assert interior(g1, g2, 2.5, 1.0) and not interior(c1, c2, 2.5, 1.0)
+
+
+def test_fig5_ring_chained_through_the_narrower_planes_fastest():
+    from experiments.ize.fig5 import chain_ring
+    old = {(1, 1): 0.0, (1, 2): 10.0, (2, 1): 50.0}          # % over the narrower plane's fastest (1, 1)
+    keys = [(1, 1), (1, 2), (2, 1), (3, 1), (3, 2)]
+    # the new run: (1, 1) is 20 % over the ring's fastest (3, 1); (3, 2) 5 % over it
+    pct = chain_ring(old, keys, [0, 3, 4], [20.0, 0.0, 5.0])
+    assert pct == pytest.approx([20.0, 32.0, 80.0, 0.0, 5.0])
+    # a ring slower than the old fastest leaves the old fastest at 0 and the old % as they were
+    pct = chain_ring(old, keys, [0, 3, 4], [0.0, 7.0, 30.0])
+    assert pct == pytest.approx([0.0, 10.0, 50.0, 7.0, 30.0])

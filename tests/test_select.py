@@ -271,3 +271,10 @@ def test_batched_evaluation_equals_one_split_at_a_time(params):
     np.testing.assert_allclose(fast[num].to_numpy(float), slow[num].to_numpy(float), rtol=1e-9, atol=1e-9)
     assert list(fast.top_form) == list(slow.top_form)
     assert fast.correct.between(0, 1).all() and (fast.n_err > 0).any()
+
+
+def test_calibration_times_fewer_builds_of_big_scenes():
+    from experiments.hapala.lib.calibrate import build_repeats
+    assert [build_repeats(n, 7) for n in (5_981, 100_000, 100_001, 500_000, 871_414)] == [7, 7, 3, 3, 2]
+    assert [build_repeats(n, 3) for n in (948, 270_336, 1_666_824)] == [3, 2, 2]
+    assert build_repeats(1_666_824, 1) == 1

@@ -147,23 +147,27 @@ def _paired_budget(quick: bool) -> tuple[int, int, dict]:
 def penalty_ci(times: dict, target, best) -> tuple[float, float]:
     """95 % interval (%, :func:`tracer.measure.timing.median_ci`) of the median per-round ratio of ``target``
     to ``best`` (lists of per-round seconds in ``times``), as a penalty."""
-    from tracer.measure.timing import median_ci
-    lo, hi = median_ci(np.asarray(times[target]) / np.asarray(times[best]))
+    from tracer.measure.timing import common_ratio, median_ci
+    lo, hi = median_ci(common_ratio(times, target, best))
     return penalty_pct(lo, 1.0), penalty_pct(hi, 1.0)
 
 
 def _unsettled(targets, half_width_pct: float):
-    """``more`` of :func:`tracer.measure.timing.time_paired`: true while the interval of some target's
-    penalty against the current best (fastest by median; against the next fastest for the best
-    itself) is wider than ``half_width_pct`` on either side."""
-    def more(times: dict) -> bool:
-        med = {i: float(np.median(v)) for i, v in times.items() if isinstance(i, int)}
+    """``more`` of :func:`tracer.measure.timing.time_paired`: while the interval of some target's
+    penalty against the current best (fastest by median among the points still timed; against the
+    next fastest for the best itself) is wider than ``half_width_pct`` on either side, the names to
+    time in one more round: the targets, the two fastest and every non-point (``others``). A
+    candidate that is none of these drops out, as its rounds no longer narrow any target's interval
+    (empty: settled)."""
+    def more(times: dict) -> set:
+        n = max(len(v) for v in times.values())
+        med = {i: float(np.median(v)) for i, v in times.items() if isinstance(i, int) and len(v) == n}
         order = sorted(med, key=med.get)
         for i in targets:
             lo, hi = penalty_ci(times, i, order[1] if i == order[0] and len(order) > 1 else order[0])
             if (hi - lo) / 2.0 > half_width_pct:
-                return True
-        return False
+                return set(targets) | set(order[:2]) | {k for k in times if not isinstance(k, int)}
+        return set()
     return more
 
 

@@ -114,20 +114,45 @@ def _panel(ax, fig, df, name, kind, rays):
     fig.colorbar(im, ax=ax, label="% over best")
 
 
-def measure_plane(scene, kind, c1s, c2s, rays, store, repeats, quick):
+def chain_ring(old: dict, keys: list, timed: list[int], pct_timed) -> np.ndarray:
+    """% over the best of every point of a widened plane, from the narrower plane's % (``old``:
+    (c1, c2) -> % over its fastest) and one paired run of its fastest point (``timed[0]``) beside the
+    new ring (``timed[1:]``, indices into ``keys``): an old point's ratio to the old fastest times
+    the old fastest's ratio in the new run puts every point on the new run's scale."""
+    ratio = 1 + np.asarray(pct_timed, float) / 100
+    at = dict(zip(timed, ratio))
+    r = np.array([at[i] if i in at else (1 + old[k] / 100) * ratio[0] for i, k in enumerate(keys)])
+    return 100 * (r / r.min() - 1)
+
+
+def measure_plane(scene, kind, c1s, c2s, rays, store, repeats, quick, before=None, widening=0):
     """One scene's plane for every ray kind: the sweep rows (each point beside the scene's 8N grid) and
-    the paired % over the plane's fastest; returns (one frame per ray kind, (c1, c2) of each's fastest)."""
+    the paired % over the plane's fastest; returns (one frame per ray kind, (c1, c2) of each's fastest).
+    ``before`` (the narrower plane's frames, one per ray kind): only the new points are timed, side by side with the narrower plane's fastest (:func:`chain_ring`), so a widening
+    costs its ring, not the whole plane again."""
     pts = plane(scene.n, kind, c1s, c2s)
     params = [{k: v for k, v in p.items() if k not in ("c1", "c2")} for p in pts]
     rows = pd.DataFrame(sweep(scene, "nested", params, rays, store, repeats, desc=f"fig5 {scene.name}"))
+    keys = [(p["c1"], p["c2"]) for p in pts]
     frames, bests = [], []
-    for ray_kind, r in rays.items():
+    for j, (ray_kind, r) in enumerate(rays.items()):
         df = rows[rows.ray_kind == ray_kind].reset_index(drop=True)
         df["model_kind"] = kind
         df["c1"] = [p["c1"] for p in pts]
         df["c2"] = [p["c2"] for p in pts]
         df["pct_over_best_sweep"] = 100 * (df.anchored_ns_per_ray / df.anchored_ns_per_ray.min() - 1)
-        df["pct_over_best"] = paired_plane(scene, "nested", params, r, store, quick=quick)
+        prev = before[j] if before else None
+        old = {} if prev is None else dict(zip(zip(prev.c1, prev.c2), prev.pct_over_best))
+        when = {} if prev is None else dict(zip(zip(prev.c1, prev.c2), prev.paired_in_widening))
+        if old:
+            timed = [keys.index(min(old, key=old.get))] + [i for i, k in enumerate(keys) if k not in old]
+            df["pct_over_best"] = chain_ring(old, keys, timed, paired_plane(scene, "nested", [params[i] for i in timed],
+                                                                              r, store, quick=quick))
+        else:
+            timed = list(range(len(keys)))
+            df["pct_over_best"] = paired_plane(scene, "nested", params, r, store, quick=quick)
+        # the widening whose paired run timed the point (beside the then fastest for widenings > 0)
+        df["paired_in_widening"] = [when.get(k, widening) for k in keys]
         best = df.loc[df.pct_over_best.idxmin()]
         frames.append(df)
         bests.append((float(best.c1), float(best.c2)))
@@ -149,10 +174,12 @@ def main(ctx, args) -> int:
     frames, lines = [], ["# Figure 5 (Ize 2007): two-level grid resolution plane, % time over the best", "",
                          f"{n_rays:,} rays per kind and point ({', '.join(kinds)}; camera: one pinhole view of the "
                          f"scene), {threads} thread(s); each scene's plane as widened below (compact: m1 = c1 N^(1/5), m2 = c2 N2^(1/3); skinny: "
-                         "m1 = c1 N^(1/3), m2 = c2 N2^(1/2)). Every point of a plane is timed side by side "
+                         "m1 = c1 N^(1/3), m2 = c2 N2^(1/2)). The first 3 x 3 plane is timed side by side "
                          f"in interleaved rounds ({'quick' if args.quick else f'{PAIRED_ROUNDS} rounds of {PAIRED_REPEATS} samples'}; "
                          "per round each point's time over that round's fastest, median over rounds), so drift "
-                         "between points cancels; the sweep's own numbers (each point timed beside the scene's 8N "
+                         "between points cancels; each widening times its new ring the same way beside the narrower "
+                         "plane's fastest point, and the older points' % are carried over through that point "
+                         "(column paired_in_widening); the sweep's own numbers (each point timed beside the scene's 8N "
                          f"grid, {repeats} rounds) are in the last column. Both columns are % of time per ray over "
                          "the plane's fastest point on the same rays; the paper's Figure 5 gives no number at its "
                          "theory point, only that it is 'usually very close to the optimal point'.", "",
@@ -164,8 +191,9 @@ def main(ctx, args) -> int:
         scene = load_scene(name)
         rays = {k: make_rays(scene, k, n_rays, seed=args.seed) for k in kinds}
         p1, p2 = list(c1s), list(c2s)
+        got = None
         for widened in range((QUICK_MAX_WIDEN if args.quick else MAX_WIDEN) + 1):
-            got, bests = measure_plane(scene, kind, p1, p2, rays, store, repeats, args.quick)
+            got, bests = measure_plane(scene, kind, p1, p2, rays, store, repeats, args.quick, got, widened)
             grown = widen(p1, p2, bests)
             if grown is None or widened == (QUICK_MAX_WIDEN if args.quick else MAX_WIDEN):
                 break

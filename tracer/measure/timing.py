@@ -202,7 +202,10 @@ def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[]
     :func:`time_call`), so slow drifts of a shared machine hit all of them alike. Returns name ->
     list of per-round median seconds; compare callables by the median of per-round ratios
     (:func:`paired_ratio`), not by ratios of separately taken medians. After ``rounds`` rounds,
-    one more round is timed while ``more(times so far)`` is true, up to ``max_rounds`` in all."""
+    one more round is timed while ``more(times so far)`` is true, up to ``max_rounds`` in all; when
+    ``more`` returns a collection of names, that round times only those of them still timed (a name
+    once left out is never timed again, so every list holds the first rounds of the same sequence,
+    and :func:`paired_ratio` compares two callables over the rounds both were timed in)."""
     out = {k: [] for k in fns}
     clock = clock or default_clock()
     number = {}
@@ -212,19 +215,33 @@ def time_paired(fns: dict, rounds: int = 7, repeats: int = 3, clock: Callable[[]
         fn()
         number[k] = calls_per_sample(clock() - t0, min_sample)
     limit = max(1, rounds) if more is None else max(1, rounds, max_rounds or 0)
+    active = list(fns)
     for r in range(limit):
-        if r >= max(1, rounds) and not more(out):
-            break
-        for k, fn in fns.items():
+        if r >= max(1, rounds):
+            want = more(out)
+            if not want:
+                break
+            if want is not True:
+                active = [k for k in active if k in want]
+        for k in active:
+            fn = fns[k]
             out[k].append(time_call(fn, repeats=repeats, warmup=0, clock=clock, min_sample=min_sample,
                                     number=number[k]).median)
     return out
 
 
 def paired_ratio(times: dict, a: str, b: str) -> tuple[float, float, float]:
-    """Median, min and max over rounds of times[a] / times[b] (from :func:`time_paired`)."""
-    r = np.asarray(times[a]) / np.asarray(times[b])
+    """Median, min and max over rounds of times[a] / times[b] (from :func:`time_paired`; over the
+    rounds both were timed in)."""
+    r = common_ratio(times, a, b)
     return float(np.median(r)), float(r.min()), float(r.max())
+
+
+def common_ratio(times: dict, a, b) -> np.ndarray:
+    """Per-round times[a] / times[b] over the rounds both were timed in (:func:`time_paired` may
+    stop timing some callables before others: the shorter list is a prefix of the same rounds)."""
+    n = min(len(times[a]), len(times[b]))
+    return np.asarray(times[a][:n], float) / np.asarray(times[b][:n], float)
 
 
 def median_ci(x, level: float = 0.95) -> tuple[float, float]:

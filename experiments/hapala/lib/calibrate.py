@@ -42,6 +42,14 @@ def _timed_build(scene, structure, params, repeats):
     return acc, time_stats(cpu), float(np.median(wall))
 
 
+def build_repeats(n: int, repeats: int) -> int:
+    """Timed builds per structure after the warm-up: ``repeats`` up to 100k triangles, half as many
+    up to 500k, 2 above. A build of seconds varies by a few % between builds (dragon-871k's kd-tree:
+    median 6.6 s, min 6.2 s of 3), while the four structures' builds of the million-triangle scenes
+    take most of the calibration's time."""
+    return repeats if n <= 100_000 else max(2, repeats // 2) if n <= 500_000 else min(repeats, 2)
+
+
 def paired_times(fns: dict, repeats: int) -> dict:
     """Per-call time {median, min} of each function over ``repeats`` interleaved rounds
     (:func:`tracer.measure.timing.time_paired`, one sample per function per round, on the default clock), so
@@ -57,8 +65,8 @@ def calibrate_scene(scene, kinds=("random", "path"), n_rays: int = 10_000, sampl
     grid's per-ray time on ``n_rays`` rays of each kind, each hierarchy's build time T_B^H and
     per-ray time t_R^H on the same rays, and the decision algorithm's probe (:func:`probe_grid`) on
     random subsets of ``samples`` rays. All times are the calling thread's CPU seconds, kept as
-    median and minimum: builds over ``repeats`` builds after a warm-up (fewer above 100k
-    triangles), ray times over ``repeats`` interleaved grid / hierarchy rounds over all rays."""
+    median and minimum: builds over :func:`build_repeats` builds after a warm-up, ray times over
+    ``repeats`` interleaved grid / hierarchy rounds over all rays."""
     with single_thread():
         return _calibrate(scene, kinds, n_rays, samples, repeats, grid_factor, hiers, seed)
 
@@ -66,11 +74,11 @@ def calibrate_scene(scene, kinds=("random", "path"), n_rays: int = 10_000, sampl
 def _calibrate(scene, kinds, n_rays, samples, repeats, grid_factor, hiers, seed) -> dict:
     from tracer.scenes.rays import make_rays
     t0 = time.perf_counter()
-    grid, T_BG, T_BG_wall = _timed_build(scene, "grid", {"factor": grid_factor}, repeats)
+    brep = build_repeats(scene.n, repeats)
+    grid, T_BG, T_BG_wall = _timed_build(scene, "grid", {"factor": grid_factor}, brep)
     gs = grid.stats()
     out = {"scene": scene.name, "N": scene.n, "grid_factor": grid_factor, "T_BG": T_BG, "T_BG_wall": T_BG_wall,
            "refs_per_tri": gs["refs_per_tri"], "grid_res": gs["res"], **havran_stats(grid), "hier": {}, "kinds": {}}
-    brep = repeats if scene.n <= 100_000 else max(2, repeats // 2)
     accs = {}
     for h in hiers:
         acc, T_BH, T_BH_wall = _timed_build(scene, h, {}, brep)
