@@ -264,12 +264,12 @@ def _run(args, settings) -> int:
 
 
 def _run_lanes(ctx, args) -> int:
-    """`all --jobs N`: every target in its own process, N at a time (:mod:`experiments.core.lanes`)."""
+    """`all --jobs N`: the targets in N lane processes, side by side (:mod:`experiments.core.lanes`)."""
     from experiments.core.common import expected_seconds
     from experiments.core.lanes import run_lanes
     from experiments.core.store import write_index
-    status = run_lanes(ALL_ORDER, READS, lambda t: [sys.executable, "-m", "experiments.run", *_sub_argv(t, args)],
-                       args.jobs, expected_seconds(args.out, ALL_ORDER, args.quick))
+    status = run_lanes(ALL_ORDER, READS, lambda t: _sub_argv(t, args), args.jobs,
+                       expected_seconds(args.out, ALL_ORDER, args.quick))
     if ctx.out.is_dir():  # the children each rewrote it; once more with every folder in place
         write_index(ctx.out, ctx.fig_dir)
     return _all_status({k: v for k, v in status.items() if v})

@@ -3,6 +3,7 @@ targets need measured once (PointStore.claim)."""
 from __future__ import annotations
 
 import json
+import os
 import sys
 import threading
 import time
@@ -13,29 +14,47 @@ from experiments.core.lanes import longest_first, run_lanes
 from experiments.core.store import PointStore
 
 
-def _command(log_dir, seconds: dict, fail=()):
-    """A stand-in target: writes its start and end times, sleeps, exits 3 when in ``fail``."""
-    def command_of(name):
-        code = (f"import json, time; t0 = time.time(); time.sleep({seconds[name]}); "
-                f"open({str(log_dir / name)!r}, 'w').write(json.dumps([t0, time.time()])); "
-                f"print('out of {name}'); raise SystemExit({3 if name in fail else 0})")
-        return [sys.executable, "-c", code]
-    return command_of
+def stand_in(argv):
+    """A stand-in target's main (module-level: lanes are spawned processes): argv = [name, seconds,
+    log dir, exit status]; writes its start and end times and its lane's pid, sleeps, returns the status;
+    status -9 kills its lane instead."""
+    name, seconds, log_dir, rc = argv[0], float(argv[1]), argv[2], int(argv[3])
+    t0 = time.time()
+    time.sleep(seconds)
+    print(f"out of {name}")
+    if rc == -9:
+        os._exit(9)
+    with open(os.path.join(log_dir, name), "w") as f:
+        f.write(json.dumps([t0, time.time(), os.getpid()]))
+    return rc
 
 
 def test_targets_start_after_what_they_read_and_at_most_jobs_at_once(tmp_path, capsys):
-    seconds = {"a": 0.6, "b": 0.2, "c": 0.2, "d": 0.1}
+    seconds = {"a": 0.6, "b": 0.2, "c": 0.2, "d": 0.1, "e": 0.1}
     reads = {"c": ("a",), "d": ("a", "b", "c")}
-    status = run_lanes(list(seconds), reads, _command(tmp_path, seconds, fail={"b"}), jobs=2,
-                       expected={"a": 10, "b": 1, "c": 1, "d": 1})
-    assert status == {"a": 0, "b": 3, "c": 0, "d": 0}  # a failed target does not stop the others
+    status = run_lanes(list(seconds), reads, lambda n: [n, str(seconds[n]), str(tmp_path), "3" if n == "b" else "0"],
+                       jobs=2, expected={"a": 10, "b": 1, "c": 1, "d": 1}, main=stand_in)
+    assert status == {"a": 0, "b": 3, "c": 0, "d": 0, "e": 0}  # a failed target does not stop the others
     span = {k: json.loads((tmp_path / k).read_text()) for k in seconds}
     assert span["c"][0] >= span["a"][1]
     assert span["d"][0] >= max(span[k][1] for k in "abc")
     assert span["b"][0] < span["a"][1]  # b did not wait for a: two at a time
     for t in span:  # never three at once
-        assert sum(s <= span[t][0] < e for s, e in span.values()) <= 2
-    assert capsys.readouterr().out.count("out of") == 4
+        assert sum(s <= span[t][0] < e for s, e, _ in span.values()) <= 2
+    # two lane processes ran all five targets (no process per target), none of them this one
+    assert len({pid for _, _, pid in span.values()}) == 2 and os.getpid() not in {p for _, _, p in span.values()}
+    out = capsys.readouterr()
+    assert out.out.count("out of") == 5 and "all: e finished, exit 0" in out.err
+
+
+def test_a_lane_that_dies_fails_its_target_loudly_and_the_rest_go_on(tmp_path, capsys):
+    seconds = {"crash": 0.1, "after": 0.1, "then": 0.1}
+    status = run_lanes(list(seconds), {"after": ("crash",)},
+                       lambda n: [n, str(seconds[n]), str(tmp_path), "-9" if n == "crash" else "0"], jobs=1,
+                       main=stand_in)
+    assert status == {"crash": 1, "after": 0, "then": 0}
+    assert "error: crash: its lane process died" in capsys.readouterr().err
+    assert (tmp_path / "after").exists() and (tmp_path / "then").exists()
 
 
 def test_longest_first_keeps_the_serial_order_on_ties():

@@ -1,5 +1,5 @@
-"""`all --jobs N`: the targets of `all` as processes, up to N at a time, each started once the targets
-whose outputs it reads have finished.
+"""`all --jobs N`: the targets of `all` side by side, up to N at a time in N lane processes, each
+target started once the targets whose outputs it reads have finished.
 
 Every target measures with one Numba thread on the thread CPU clock, so on a machine of N cores
 N targets can measure side by side: each is timed by its own thread's CPU time, and every time is a
@@ -8,18 +8,25 @@ ratio to a reference timed beside it in the same process, so what a neighbour on
 hits a point and its reference alike. They share one point store: a point two targets need is
 measured once (:meth:`experiments.core.store.PointStore.claim`).
 
+A lane is one long-lived worker process (spawned, so it shares no threads or locks with this one) that
+runs target after target in-process, as the serial `all` does: the imports and the loaded kernels
+are paid once per lane, not once per target (26 start-ups were most of `all --quick`). A target's
+output (file descriptors 1 and 2, so compiled code's writes too) goes to a file and is printed whole
+when it finishes; a failed target does not stop the others, and a lane that dies (a crash in
+compiled code) fails its target loudly and is replaced.
+
 Among the targets ready to start, the longest first (their wall time in the last run's meta.json,
 :func:`experiments.core.common.expected_seconds`), so the long ones do not end up alone at the end.
-A target's output is printed whole when it finishes; a failed target does not stop the others, as
-in the serial `all`.
 """
 from __future__ import annotations
 
+import multiprocessing
 import os
-import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 
@@ -33,15 +40,44 @@ def _ready(name: str, reads: dict, done: set, order: list[str]) -> bool:
     return all(d in done for d in reads.get(name, ()) if d in order)
 
 
-def run_lanes(order: list[str], reads: dict, command_of, jobs: int, expected: dict | None = None) -> dict:
-    """Run the command ``command_of(name)`` of every target of ``order`` (``python -m experiments.run
-    <target> …``), at most ``jobs`` at a time, each once its ``reads`` have finished. Returns name ->
-    exit status. Each child's stdout and stderr are printed when it ends (stderr on stderr)."""
+def _in_lane(main, argv: list[str], out: str, err: str) -> int:
+    """One target in a lane process: ``main(argv)`` with file descriptors 1 and 2 sent to ``out`` and
+    ``err`` for its duration."""
+    os.environ["TQDM_DISABLE"] = "1"  # no progress bars in a log printed whole
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(out, "w") as fo, open(err, "w") as fe:
+        os.dup2(fo.fileno(), 1)
+        os.dup2(fe.fileno(), 2)
+        try:
+            return int(main(argv) or 0)
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+
+
+def _lanes(jobs: int) -> ProcessPoolExecutor:
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+
+
+def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict | None = None, main=None) -> dict:
+    """Run ``main(argv_of(name))`` (default :func:`experiments.run.main`; a module-level function) for
+    every target of ``order`` in ``jobs`` lane processes, each once its ``reads`` have finished.
+    Returns name -> exit status (1 for a target whose lane died). Each target's stdout and stderr
+    are printed when it ends (stderr on stderr)."""
+    if main is None:
+        from experiments.run import main
     pending = longest_first(order, expected or {})
-    running: dict[str, tuple] = {}
+    running: dict = {}  # future -> (name, start time)
     done: set = set()
     status: dict[str, int] = {}
     started = time.time()
+    pool = _lanes(jobs)
     with tempfile.TemporaryDirectory(prefix="gridcost-lanes-") as tmp:
         try:
             while pending or running:
@@ -49,30 +85,40 @@ def run_lanes(order: list[str], reads: dict, command_of, jobs: int, expected: di
                     if len(running) >= jobs:
                         break
                     pending.remove(name)
-                    out, err = (open(Path(tmp) / f"{name}.{s}", "w+") for s in ("out", "err"))
-                    proc = subprocess.Popen(command_of(name), stdout=out, stderr=err,
-                                            env=dict(os.environ, TQDM_DISABLE="1"))
-                    running[name] = (proc, out, err, time.time())
+                    fut = pool.submit(_in_lane, main, argv_of(name), *(str(Path(tmp) / f"{name}.{s}")
+                                                                        for s in ("out", "err")))
+                    running[fut] = (name, time.time())
                     print(f"all: {name} started ({time.time() - started:.0f} s)", file=sys.stderr, flush=True)
                 if not running:  # nothing can start: a dependency outside `order` (never happens)
                     raise RuntimeError(f"all --jobs: no target can start: {pending}")
-                time.sleep(0.2)
-                for name, (proc, out, err, t0) in list(running.items()):
-                    if proc.poll() is None:
-                        continue
-                    del running[name]
+                finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                broken = False
+                for fut in finished:
+                    name, t0 = running.pop(fut)
                     done.add(name)
-                    status[name] = proc.returncode
-                    for f, stream in ((out, sys.stdout), (err, sys.stderr)):
-                        f.seek(0)
-                        stream.write(f.read())
-                        f.close()
-                    print(f"all: {name} finished, exit {proc.returncode}, {time.time() - t0:.0f} s "
+                    try:
+                        status[name] = fut.result()
+                    except BrokenProcessPool:
+                        status[name], broken = 1, True
+                        print(f"error: {name}: its lane process died (killed, or a crash in compiled code); "
+                              "the other targets go on in a new lane", file=sys.stderr, flush=True)
+                    except Exception as exc:  # main returns a status; this is the lane's own failure
+                        status[name] = 1
+                        print(f"internal error in {name}: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
+                    for s, stream in (("out", sys.stdout), ("err", sys.stderr)):
+                        f = Path(tmp) / f"{name}.{s}"
+                        stream.write(f.read_text(errors="replace") if f.exists() else "")
+                    print(f"all: {name} finished, exit {status[name]}, {time.time() - t0:.0f} s "
                           f"({time.time() - started:.0f} s in)", file=sys.stderr, flush=True)
+                if broken:  # a dead lane breaks the pool: what still ran there is requeued in a new one
+                    for fut, (name, _) in running.items():
+                        pending.insert(0, name)
+                    running.clear()
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    pool = _lanes(jobs)
         finally:
-            for proc, out, err, _ in running.values():  # interrupted: the children stop with us
-                proc.terminate()
-                proc.wait()
-                out.close()
-                err.close()
+            if running:  # interrupted: the lanes stop with us, mid-target (its outputs are written atomically)
+                for proc in list(getattr(pool, "_processes", {}).values()):
+                    proc.terminate()
+            pool.shutdown(wait=True, cancel_futures=True)
     return status
