@@ -109,3 +109,19 @@ def test_fig5_ring_chained_through_the_narrower_planes_fastest():
     # a ring slower than the old fastest leaves the old fastest at 0 and the old % as they were
     pct = chain_ring(old, keys, [0, 3, 4], [0.0, 7.0, 30.0])
     assert pct == pytest.approx([0.0, 10.0, 50.0, 7.0, 30.0])
+
+
+def test_plane_pct_against_one_fixed_point_per_round():
+    """Drift common to a round cancels; the fastest point is at 0; equal points stay near 0 (a
+    per-round minimum over noisy points would lift all of them, by more the more points)."""
+    from experiments.core.sweep import plane_pct
+    rng = np.random.default_rng(3)
+    t = np.array([1.0, 1.2, 2.0])[:, None] * (1 + 0.01 * rng.standard_normal((3, 41)))
+    drift = 1 + 0.3 * rng.random(41)
+    assert plane_pct(t * drift) == pytest.approx(plane_pct(t))
+    pct = plane_pct(t)
+    assert pct[0] == 0 and pct[1] == pytest.approx(20, abs=1.5) and pct[2] == pytest.approx(100, abs=3)
+    equal = 1 + 0.05 * rng.random((6, 41))
+    per_round_min = 100 * (np.median(equal / equal.min(axis=0), axis=1) - 1)  # the per-round minimum's bias:
+    assert per_round_min.min() > 0.5                                              # even the best is lifted
+    assert plane_pct(equal).min() == 0 and np.median(plane_pct(equal)) < np.median(per_round_min)

@@ -176,7 +176,7 @@ def main(ctx, args) -> int:
                          f"scene), {threads} thread(s); each scene's plane as widened below (compact: m1 = c1 N^(1/5), m2 = c2 N2^(1/3); skinny: "
                          "m1 = c1 N^(1/3), m2 = c2 N2^(1/2)). The first 3 x 3 plane is timed side by side "
                          f"in interleaved rounds ({'quick' if args.quick else f'{PAIRED_ROUNDS} rounds of {PAIRED_REPEATS} samples'}; "
-                         "per round each point's time over that round's fastest, median over rounds), so drift "
+                         "per round each point's time over the plane's fastest point's time in that round, median over rounds), so drift "
                          "between points cancels; each widening times its new ring the same way beside the narrower "
                          "plane's fastest point, and the older points' % are carried over through that point "
                          "(column paired_in_widening); the sweep's own numbers (each point timed beside the scene's 8N "
