@@ -42,8 +42,7 @@ def _ready(name: str, reads: dict, done: set, order: list[str]) -> bool:
 
 def _in_lane(main, argv: list[str], out: str, err: str) -> int:
     """One target in a lane process: ``main(argv)`` with file descriptors 1 and 2 sent to ``out`` and
-    ``err`` for its duration."""
-    os.environ["TQDM_DISABLE"] = "1"  # no progress bars in a log printed whole
+    ``err`` for its duration (stderr is then no terminal, so the progress bars stay off)."""
     sys.stdout.flush()
     sys.stderr.flush()
     saved = os.dup(1), os.dup(2)
