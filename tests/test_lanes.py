@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import threading
 import time
@@ -108,3 +109,43 @@ def test_what_a_target_reads_is_a_target_of_all_that_runs_before_it():
         assert target in ALL_ORDER
         for r in reads:
             assert ALL_ORDER.index(r) < ALL_ORDER.index(target), (target, r)
+
+
+def sleeper(argv):
+    """A stand-in target that writes its lane's pid at once, then sleeps ``argv[2]`` seconds."""
+    with open(os.path.join(argv[1], argv[0]), "w") as f:
+        f.write(str(os.getpid()))
+    time.sleep(float(argv[2]))
+    return 0
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("sig, status", [(signal.SIGTERM, 128 + signal.SIGTERM), (signal.SIGKILL, -signal.SIGKILL)])
+def test_lanes_stop_with_the_run(tmp_path, sig, status):
+    """`all --jobs` stopped by a scheduler (SIGTERM) or killed outright (SIGKILL): no lane goes on
+    measuring for a run that is gone."""
+    import subprocess
+    code = (f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); from test_lanes import sleeper; "
+            f"from experiments.core.lanes import run_lanes; "
+            f"run_lanes(['a', 'b'], {{}}, lambda n: [n, {str(tmp_path)!r}, '60'], 2, main=sleeper)")
+    run = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 60
+    while not all((tmp_path / n).exists() and (tmp_path / n).read_text() for n in "ab"):
+        assert time.time() < deadline and run.poll() is None
+        time.sleep(0.1)
+    pids = [int((tmp_path / n).read_text()) for n in "ab"]
+    run.send_signal(sig)
+    assert run.wait(timeout=30) == status
+    if sig == signal.SIGTERM:  # one line names what did not finish
+        assert "all: stopped; a, b did not finish" in run.stderr.read()
+    deadline = time.time() + 10
+    while any(_alive(p) for p in pids) and time.time() < deadline:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in pids)

@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -60,8 +62,23 @@ def _in_lane(main, argv: list[str], out: str, err: str) -> int:
             os.close(saved[1])
 
 
+def _lane_start() -> None:
+    """A lane ends with `all`: on Linux the kernel sends it SIGTERM when the process that started it
+    exits, even killed, so no lane goes on measuring for a run that is gone."""
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the SIGTERM handler of run_lanes still stops them
+        pass
+
+
 def _lanes(jobs: int) -> ProcessPoolExecutor:
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_lane_start)
+
+
+def _stop(signum, frame):
+    raise SystemExit(128 + signum)
 
 
 def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict | None = None, main=None) -> dict:
@@ -76,6 +93,8 @@ def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict 
     done: set = set()
     status: dict[str, int] = {}
     started = time.time()
+    # SIGTERM (a job scheduler, `kill`) unwinds like Ctrl-C, so the finally below stops the lanes
+    old = signal.signal(signal.SIGTERM, _stop) if threading.current_thread() is threading.main_thread() else None
     pool = _lanes(jobs)
     with tempfile.TemporaryDirectory(prefix="gridcost-lanes-") as tmp:
         try:
@@ -117,7 +136,12 @@ def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict 
                     pool = _lanes(jobs)
         finally:
             if running:  # interrupted: the lanes stop with us, mid-target (its outputs are written atomically)
+                print("all: stopped; " + ", ".join(n for n, _ in running.values()) + " did not finish (their "
+                      "folders are as before the run; a rerun resumes from the stored points)", file=sys.stderr,
+                      flush=True)
                 for proc in list(getattr(pool, "_processes", {}).values()):
                     proc.terminate()
             pool.shutdown(wait=True, cancel_futures=True)
+            if old is not None:
+                signal.signal(signal.SIGTERM, old)
     return status
