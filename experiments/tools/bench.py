@@ -48,6 +48,9 @@ VARIANTS = {
     "bvh4-sah-fit": ("bvh4", {"trav_cost": "fitted"}),
     # 8 children with AVX2 (4 without), leaves of four triangles tested together (tracer.accel.wide_bvh)
     "wbvh": ("wbvh", {}),
+    # leaves of up to 8 triangles (two blocks of four) and a node priced as 2 leaf blocks: fewer, fuller
+    # leaves for random rays (a candidate default for the wide BVH, issue 29; paired against the default)
+    "wbvh-leaf8": ("wbvh", {"max_leaf": 8, "trav_cost": 2.0}),
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
@@ -59,7 +62,7 @@ def default_names() -> list[str]:
 
 
 #: the structures whose Embree ratio is also measured in interleaved rounds (the headline ratios)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "cgt")
+PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "wbvh-leaf8", "cgt")
 
 
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
