@@ -128,8 +128,9 @@ def chain_ring(old: dict, keys: list, timed: list[int], pct_timed) -> np.ndarray
 def measure_plane(scene, kind, c1s, c2s, rays, store, repeats, quick, before=None, widening=0):
     """One scene's plane for every ray kind: the sweep rows (each point beside the scene's 8N grid) and
     the paired % over the plane's fastest; returns (one frame per ray kind, (c1, c2) of each's fastest).
-    ``before`` (the narrower plane's frames, one per ray kind): only the new points are timed, side by side with the narrower plane's fastest (:func:`chain_ring`), so a widening
-    costs its ring, not the whole plane again."""
+    ``before`` (the narrower plane's frames, one per ray kind): only the new points are timed, side
+    by side with the narrower plane's fastest (:func:`chain_ring`), so a widening costs its ring, not
+    the whole plane again."""
     pts = plane(scene.n, kind, c1s, c2s)
     params = [{k: v for k, v in p.items() if k not in ("c1", "c2")} for p in pts]
     rows = pd.DataFrame(sweep(scene, "nested", params, rays, store, repeats, desc=f"fig5 {scene.name}"))
@@ -138,8 +139,8 @@ def measure_plane(scene, kind, c1s, c2s, rays, store, repeats, quick, before=Non
     for j, (ray_kind, r) in enumerate(rays.items()):
         df = rows[rows.ray_kind == ray_kind].reset_index(drop=True)
         df["model_kind"] = kind
-        df["c1"] = [p["c1"] for p in pts]
-        df["c2"] = [p["c2"] for p in pts]
+        df["c1"] = [k[0] for k in keys]
+        df["c2"] = [k[1] for k in keys]
         df["pct_over_best_sweep"] = 100 * (df.anchored_ns_per_ray / df.anchored_ns_per_ray.min() - 1)
         prev = before[j] if before else None
         old = {} if prev is None else dict(zip(zip(prev.c1, prev.c2), prev.pct_over_best))
@@ -149,7 +150,6 @@ def measure_plane(scene, kind, c1s, c2s, rays, store, repeats, quick, before=Non
             df["pct_over_best"] = chain_ring(old, keys, timed, paired_plane(scene, "nested", [params[i] for i in timed],
                                                                               r, store, quick=quick))
         else:
-            timed = list(range(len(keys)))
             df["pct_over_best"] = paired_plane(scene, "nested", params, r, store, quick=quick)
         # the widening whose paired run timed the point (beside the then fastest for widenings > 0)
         df["paired_in_widening"] = [when.get(k, widening) for k in keys]
