@@ -90,7 +90,7 @@ FAMILIES = {
         ("width8", "wbvh", dict(width=8)),
         ("width4", "wbvh", dict(width=4)),
         ("width8-leaf1-bins2", "wbvh", dict(width=8, max_leaf=1, bins=2)),
-        ("width8-leaf8", "wbvh", dict(width=8, max_leaf=8)),
+        ("width8-leaf4", "wbvh", dict(width=8, max_leaf=4, trav_cost=1.0)),
     ],
     "cgt": [
         ("packet", "cgt", dict(res=RES, packet=K)),

@@ -1,9 +1,10 @@
 """Wide BVH: 8 children per node on CPUs with AVX2 (one ``<8 x float>`` slab test, :func:`tracer.accel.simd.slab8`),
-4 elsewhere (:func:`~tracer.accel.simd.slab4`), leaves of up to four triangles tested together in
-``<4 x double>`` lanes (:func:`tracer.accel.simd_tri.ray_tri4`).
+4 elsewhere (:func:`~tracer.accel.simd.slab4`), leaves of up to eight triangles tested in blocks of four
+in ``<4 x double>`` lanes (:func:`tracer.accel.simd_tri.ray_tri4`).
 
 Build: one canonical binned-SAH binary BVH (:func:`tracer.accel.bvh.bvh_build`, leaves priced in blocks of
-four triangles, as Embree prices Triangle4 leaves), then collapsed top-down to ``width`` children per
+four triangles, as Embree prices Triangle4 leaves; the leaf size and node weight are
+:data:`~tracer.accel.constants.WIDE_MAX_LEAF` and ``WIDE_TRAV_COST``, fitted by paired timing), then collapsed top-down to ``width`` children per
 node (the collapse of :mod:`tracer.accel.bvh4`: open the interior child of largest surface area until
 the node is full or holds only leaves), the layout conversion tinybvh makes from its one binary build.
 
@@ -43,7 +44,7 @@ from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.errors import GridcostError
 from tracer.measure.memory import check_budget, working_set
 from tracer.measure.provenance import bvh_width
-from tracer.accel.constants import WIDE_BLOCK, WIDE_TRAV_COST
+from tracer.accel.constants import WIDE_BLOCK, WIDE_MAX_LEAF, WIDE_TRAV_COST
 
 #: order words per node (one per octant of direction signs)
 NORD = 8
@@ -351,8 +352,8 @@ def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4, stack_
 
 class WideBVH(TreeTraceMixin, Accel):
     """8-wide BVH on AVX2 CPUs, 4-wide elsewhere (``width``: None = :func:`host_width`, or 4 / 8), with
-    leaves of up to ``max_leaf`` (4) triangles tested four at a time; ``bins`` (32) and ``trav_cost``
-    (relative to one block test, :data:`WIDE_TRAV_COST`) of the binary SAH build it collapses."""
+    leaves of up to ``max_leaf`` (:data:`WIDE_MAX_LEAF`, 8) triangles tested four at a time; ``bins`` (32) and
+    ``trav_cost`` (relative to one block test, :data:`WIDE_TRAV_COST`, 2) of the binary SAH build it collapses."""
 
     name = "wbvh"
     _kernel = staticmethod(wide_trace)
@@ -360,7 +361,7 @@ class WideBVH(TreeTraceMixin, Accel):
                       "tests": "ray/triangle tests (triangles of the leaves visited)",
                       "nodes": "nodes visited (leaves included)"}
 
-    def __init__(self, width=None, bins=32, max_leaf=4, trav_cost=WIDE_TRAV_COST):
+    def __init__(self, width=None, bins=32, max_leaf=WIDE_MAX_LEAF, trav_cost=WIDE_TRAV_COST):
         self.width, self.bins, self.max_leaf, self.trav_cost = width, bins, max_leaf, trav_cost
 
     def build(self, scene):

@@ -52,8 +52,9 @@ NESTED_KEPT_PER_REF = 4
 BVH_BYTES_PER_TRI = 285
 BVH4_BYTES_PER_TRI = 395
 SORTEDLISTS_BYTES_PER_TRI = 266
-#: the wide BVH (binary SAH build collapsed, leaves in blocks of four): 339-349 on the four meshes
-WBVH_BYTES_PER_TRI = 345
+#: the wide BVH (binary SAH build collapsed, leaves of up to eight in blocks of four): 264-284 on
+#: bunny-16k, dragon-48k, fandisk-x4, particles-20000 (338-351 with leaves of up to four)
+WBVH_BYTES_PER_TRI = 280
 KDTREE_BYTES_PER_TRI = 2100
 #: the edge build's peak with the least duplication seen (particles-50k, 1.2 references per
 #: triangle): the kd-tree checks what it holds as it builds (:func:`tracer.accel.kdtree_build.kd_build`),
