@@ -64,3 +64,21 @@ def test_fig_summary_shares_of_nothing_read_a_dash():
     from experiments.hapala.figs import _share
     assert _share(float("nan")) == "–" and _share(None) == "–"
     assert _share(0.25) == "25%" and _share(0.5834, 1) == "58.3%"
+
+
+def test_hierarchy_comparison_hand_values():
+    """grid wins = scenes with R_C = inf; medians of t_G/t_H, T_B^H/T_B^G and of the finite R_C; the
+    paper's R_C median over its scenes where the kd-tree pays off (R_C > 0 in its convention)."""
+    from experiments.hapala.table1 import hierarchy_comparison
+    t = pd.DataFrame({"t_RG_us_random": [2.0, 4.0, 6.0], "t_RH_us_random": [1.0, 8.0, 2.0],
+                      "R_C_random": [100.0, np.inf, 300.0], "t_RG_us_path": [1.0, 1.0, 1.0],
+                      "t_RH_us_path": [2.0, 2.0, 4.0], "R_C_path": [np.inf, np.inf, np.inf],
+                      "T_BG_ms": [1.0, 2.0, 1.0], "T_BH_ms": [3.0, 10.0, 7.0]})
+    cmp_, _ = hierarchy_comparison({"A": t})
+    a = cmp_[cmp_.hier == "A"].set_index("kind")
+    assert a.loc["random", "grid_wins"] == 1 and a.loc["random", "median_tG_over_tH"] == 2.0
+    assert a.loc["random", "median_R_C"] == 200.0 and a.loc["random", "median_TBH_over_TBG"] == 5.0
+    assert a.loc["path", "grid_wins"] == 3 and np.isnan(a.loc["path", "median_R_C"])
+    assert a.loc["path", "median_tG_over_tH"] == 0.5
+    p = cmp_[cmp_.hier == "kd-tree (paper)"].set_index("kind")
+    assert p.loc["random", "median_R_C"] == np.median([r[7] for r in PAPER if r[7] > 0])
