@@ -149,3 +149,52 @@ def test_lanes_stop_with_the_run(tmp_path, sig, status):
     while any(_alive(p) for p in pids) and time.time() < deadline:
         time.sleep(0.1)
     assert not any(_alive(p) for p in pids)
+
+
+_COMPILER = """
+import os, sys, time
+sys.path.insert(0, sys.argv[2])
+if sys.argv[3] == "lock":
+    from experiments.core.lanes import one_compile_at_a_time
+    one_compile_at_a_time()
+while not os.path.exists(sys.argv[1]):
+    time.sleep(0.001)
+from kernel_to_lock import f
+f(3.0)
+print(f.stats.cache_misses[f.signatures[0]], f.stats.cache_hits[f.signatures[0]])
+"""
+_KERNEL = """
+import numpy as np
+from tracer.accel._jit import jit
+
+
+@jit
+def f(x):
+    a = np.zeros(64)
+    for i in range(64):
+        a[i] = np.sin(x * i) + np.cos(x / (i + 1)) * np.sqrt(abs(x) + i)
+    s = 0.0
+    for i in range(64):
+        for j in range(i):
+            s += a[i] * a[j] if a[i] > a[j] else a[j] - a[i]
+    return s
+"""
+
+
+def test_two_lanes_from_a_cold_cache_compile_a_kernel_once(tmp_path):
+    """Two processes that start the same cached kernel at the same moment from an empty kernel cache:
+    under one_compile_at_a_time exactly one compiles it (a cache miss) and the other loads it
+    (a hit); without the lock both compile it (checked: 2 misses)."""
+    import subprocess
+    (tmp_path / "kernel_to_lock.py").write_text(_KERNEL)
+    (tmp_path / "compiler.py").write_text(_COMPILER)
+    go = tmp_path / "go"
+    env = {**os.environ, "GRIDCOST_NUMBA_CACHE": str(tmp_path / "cache"),
+           "PYTHONPATH": os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")])}
+    procs = [subprocess.Popen([sys.executable, str(tmp_path / "compiler.py"), str(go), str(tmp_path), "lock"],
+                              env=env, stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    time.sleep(3)  # both have imported numba and wait for the go
+    go.write_text("go")
+    out = [p.communicate(timeout=120)[0].split() for p in procs]
+    assert all(p.returncode == 0 for p in procs)
+    assert sorted((int(m), int(h)) for m, h in out) == [(0, 1), (1, 0)]
