@@ -76,13 +76,14 @@ def _lane_start() -> None:
 
 def one_compile_at_a_time() -> None:
     """Make each cached kernel compile in one process at a time: Numba's dispatcher compile of a
-    function with an on-disk cache runs under an exclusive file lock named after the function, in
-    the kernel cache folder. From a cold cache the lanes start targets that need the same kernels
-    (the grid's variants in table2, table4, fig5...): without the lock both compile them side by
-    side, each for minutes. With it the second waits, and then Numba's own first step, the cache
-    lookup, loads what the first wrote. Callees lock after their callers and the call graph has no
-    cycles, so two lanes cannot wait on each other. Uncached functions (Numba's own overloads)
-    are left alone; without fcntl (not POSIX) or a writable cache folder nothing changes."""
+    function with an on-disk cache runs under an exclusive file lock named after the function and
+    its argument types (other variants of it compile meanwhile), in the kernel cache folder. From a
+    cold cache the lanes start targets that need the same kernels (the grid's variants in table2,
+    table4, fig5...): without the lock both compile them side by side, each for minutes. With it
+    the second waits, and then Numba's own first step, the cache lookup, loads what the first
+    wrote. Callees lock after their callers and the call graph has no cycles, so two lanes cannot
+    wait on each other. Uncached functions (Numba's own overloads) are left alone; without fcntl
+    (not POSIX) or a writable cache folder nothing changes."""
     try:
         import fcntl
     except ImportError:
@@ -97,10 +98,10 @@ def one_compile_at_a_time() -> None:
     if getattr(compile_, "_gridcost_locked", False):
         return
 
-    held: set = set()  # names this process holds: a nested compile of the same function does not wait on itself
+    held: set = set()  # locks this process holds: a nested compile of the same one does not wait on itself
 
     def compile(self, sig):
-        name = f"{self.py_func.__module__}.{self.py_func.__qualname__}"
+        name = f"{self.py_func.__module__}.{self.py_func.__qualname__}{sig}"
         if isinstance(getattr(self, "_cache", None), NullCache) or name in held:
             return compile_(self, sig)
         try:
