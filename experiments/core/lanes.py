@@ -64,61 +64,12 @@ def _in_lane(main, argv: list[str], out: str, err: str) -> int:
 
 def _lane_start() -> None:
     """A lane ends with `all`: on Linux the kernel sends it SIGTERM when the process that started it
-    exits, even killed, so no lane goes on measuring for a run that is gone. Its kernels compile one
-    lane at a time (:func:`one_compile_at_a_time`)."""
+    exits, even killed, so no lane goes on measuring for a run that is gone."""
     try:
         import ctypes
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):  # not Linux: the SIGTERM handler of run_lanes still stops them
         pass
-    one_compile_at_a_time()
-
-
-def one_compile_at_a_time() -> None:
-    """Make each cached kernel compile in one process at a time: Numba's dispatcher compile of a
-    function with an on-disk cache runs under an exclusive file lock named after the function and
-    its argument types (other variants of it compile meanwhile), in the kernel cache folder. From a
-    cold cache the lanes start targets that need the same kernels (the grid's variants in table2,
-    table4, fig5...): without the lock both compile them side by side, each for minutes. With it
-    the second waits, and then Numba's own first step, the cache lookup, loads what the first
-    wrote. Callees lock after their callers and the call graph has no cycles, so two lanes cannot
-    wait on each other. Uncached functions (Numba's own overloads) are left alone; without fcntl
-    (not POSIX) or a writable cache folder nothing changes."""
-    try:
-        import fcntl
-    except ImportError:
-        return
-    import hashlib
-
-    from numba.core import dispatcher
-    from numba.core.caching import NullCache
-
-    from tracer.accel._jit import CACHE_DIR
-    compile_ = dispatcher.Dispatcher.compile
-    if getattr(compile_, "_gridcost_locked", False):
-        return
-
-    held: set = set()  # locks this process holds: a nested compile of the same one does not wait on itself
-
-    def compile(self, sig):
-        name = f"{self.py_func.__module__}.{self.py_func.__qualname__}{sig}"
-        if isinstance(getattr(self, "_cache", None), NullCache) or name in held:
-            return compile_(self, sig)
-        try:
-            os.makedirs(os.path.join(CACHE_DIR, "locks"), exist_ok=True)
-            fd = os.open(os.path.join(CACHE_DIR, "locks", hashlib.sha1(name.encode()).hexdigest()[:16]),
-                         os.O_CREAT | os.O_RDWR, 0o644)
-        except OSError:
-            return compile_(self, sig)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX)
-            held.add(name)
-            return compile_(self, sig)
-        finally:
-            held.discard(name)
-            os.close(fd)  # releases the lock
-    compile._gridcost_locked = True
-    dispatcher.Dispatcher.compile = compile
 
 
 def _lanes(jobs: int) -> ProcessPoolExecutor:
