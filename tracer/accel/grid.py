@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, ray_jit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel
 from tracer.accel.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
@@ -174,7 +174,7 @@ def _block_exit(o, d, lo, bsize, b):
     return INF
 
 
-@jit(inline="always")
+@ray_jit
 def grid_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, gp, nx, ny, nz,
              cell_start, tri_ids, tv, mb, chunk, macro, mshift, occ=None, tvi=None, tb=None, t4=None):
     """Trace one ray through a uniform grid: closest hit (or any hit when ``anyhit``).

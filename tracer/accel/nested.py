@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, ray_jit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.accel.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
@@ -111,7 +111,7 @@ def _gather_ranges(src: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.
 
 
 # ---------------------------------------------------------------- traversal
-@jit(inline="always")
+@ray_jit
 def nested_ray(ox, oy, oz, dx, dy, dz, tmin, tmax, anyhit, GF, GI, cells, tri_ids, tv,
                sti, stf, lvl, ray):
     """Trace one ray through a nested grid: closest hit (or any hit when ``anyhit``).

@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from tracer.accel._jit import jit
+from tracer.accel._jit import jit, ray_jit
 from tracer.accel.geometry import INF, PARALLEL_COS
 
 #: margin in cell units for cell ranges, first/last slices and the culling planes
@@ -26,7 +26,7 @@ _NW = 17
 _BID, _IDX, _SINGLE, _NL = range(4)
 
 
-@jit(inline="always")
+@ray_jit
 def _lane(dx, dy, dz, dd, sx, sy, sz, sn, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, best):
     """One ray of a packet test: ray_triangle's float64 expressions without branches -> (hit, t)."""
     det = dx * nx + dy * ny + dz * nz
@@ -41,7 +41,7 @@ def _lane(dx, dy, dz, dd, sx, sy, sz, sn, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, 
     return (det * det > p2nn * dd) & ok & (t > tmin) & (t < best), t
 
 
-@jit(inline="always")
+@ray_jit
 def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
     """Rays [0, n) of the packet against one triangle (float64 vertices): a loop LLVM vectorises,
     with masked stores of the hits. With a common origin s = a - o and s.n are hoisted. Returns
@@ -83,17 +83,17 @@ def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
     return nh
 
 
-@jit(inline="always")
+@ray_jit
 def _min(a, b):
     return a if a < b else b  # a select LLVM vectorises (the builtin min is not)
 
 
-@jit(inline="always")
+@ray_jit
 def _max(a, b):
     return a if a > b else b
 
 
-@jit(inline="always")
+@ray_jit
 def _plane_cull(gu0, gu1, gu2, k0, k1, k2, alo, slo, ahi, shi):
     """All three vertices below the lower or above the upper frustum plane u = a + s k'."""
     if gu0 - (alo + slo * k0) < -EPS and gu1 - (alo + slo * k1) < -EPS and gu2 - (alo + slo * k2) < -EPS:
@@ -137,7 +137,7 @@ def _bounds(n, W):
     return alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v
 
 
-@jit(inline="always")
+@ray_jit
 def _span(n, I):
     """The last slice any of rays [0, n) needs, and the first slice after which one needs no more."""
     hi = -1
@@ -148,7 +148,7 @@ def _span(n, I):
     return hi, lo
 
 
-@jit(inline="always")
+@ray_jit
 def _retire(q, i, W, I, out_t, out_id, counters, tested):
     """Packet slot q (ray i) is done: write its hit, if any, and the packet's triangle tests."""
     if I[_BID, q] >= 0:
@@ -158,7 +158,7 @@ def _retire(q, i, W, I, out_t, out_id, counters, tested):
         counters[i, 2] = tested
 
 
-@jit(inline="always")
+@ray_jit
 def _needs(n, anyhit, W, I):
     """After hits: a ray with a hit needs no slice past its hit's (closest hit), or none at all
     (any hit: I[_NL] = -1)."""
@@ -167,7 +167,7 @@ def _needs(n, anyhit, W, I):
             I[_NL, q] = -1 if anyhit else min(I[_NL, q], int(math.floor(W[_KO, q] + W[_BEST, q] * W[_KD, q] + EPS)))
 
 
-@jit(inline="always")
+@ray_jit
 def _compact(n, s, W, I, out_t, out_id, counters, tested):
     """Retire the rays of slots [0, n) that need no slice past ``s`` (I[_NL] <= s): write their
     results, move the last active ray into each freed slot (the retired ray's id stays at the end of
@@ -192,7 +192,7 @@ def _compact(n, s, W, I, out_t, out_id, counters, tested):
     return n, retired
 
 
-@jit(inline="always")
+@ray_jit
 def _cells(alo, ahi, slo, shi, s0, s1, n):
     """Cells [c0, c1] (clipped to [0, n)) the frustum covers along one axis for k' in [s0, s1]."""
     lo = min(alo + slo * s0, alo + slo * s1)
@@ -200,7 +200,7 @@ def _cells(alo, ahi, slo, shi, s0, s1, n):
     return max(int(math.floor(lo - EPS)), 0), min(int(math.floor(hi + EPS)), n - 1)
 
 
-@jit(inline="always")
+@ray_jit
 def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0, fr, edge, ox, oy, oz, ru, rv):
     """Is the triangle outside the frustum ``fr``? Planes first; corner rays against the edges
     (common origin ``o``) for triangles wider than EDGE_MIN cells."""
