@@ -8,6 +8,7 @@ registry of scene names, which re-exports this module's names) sits above them a
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,6 +51,20 @@ class Scene:
     @property
     def n(self) -> int:
         return int(self.tris.shape[0])
+
+    @functools.cached_property
+    def axis_sums(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(P, E)``: per axis, summed over the triangles (float64), the absolute component of the
+        edge cross product (twice the area projected on the plane normal to that axis) and the
+        extent. Both scale with the cell size component by component, so a grid's expected
+        references at any resolution follow from these six numbers
+        (:func:`tracer.measure.footprint.expected_refs`); computed once per scene."""
+        p, e = np.zeros(3), np.zeros(3)
+        for s in range(0, self.n, 1 << 13):  # in blocks: a float64 copy of a large mesh stays small
+            t = self.tris[s:s + (1 << 13)].astype(np.float64)
+            p += np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum(axis=0)
+            e += (t.max(axis=1) - t.min(axis=1)).sum(axis=0)
+        return p, e
 
     def __repr__(self) -> str:
         return f"Scene({self.name!r}, N={self.n:,}, bounds={self.bounds.tolist()})"
