@@ -8,8 +8,9 @@ The cache lives in a folder named by the digest of every source file of ``tracer
 (:func:`tracer.measure.provenance.numba_cache_dir`): Numba invalidates a cached function only when its own
 file changes, while our kernels inline ``geometry.ray_triangle``, ``dda_setup`` and
 :func:`store_ray` from other files, so an edit to ``geometry.py`` could otherwise leave the grid
-running old machine code. Every kernel is decorated through :func:`jit` / :func:`pjit`, which point
-Numba at that folder at decoration time (when Numba picks a function's cache locator).
+running old machine code. Every kernel is decorated through :func:`jit` / :func:`pjit` (or
+:func:`ray_jit` for a per-ray walk the batched kernels call), which point Numba at that folder at
+decoration time (when Numba picks a function's cache locator).
 """
 import os
 import sys

@@ -19,6 +19,8 @@ from tracer.errors import GridcostError
 FLAT_PAD = 1e-3
 #: every side of the bounds is pushed out by this fraction of the largest extent
 BOUNDS_PAD = 1e-5
+#: triangles per block of :attr:`Scene.axis_sums` (its float64 copy of a large mesh stays small)
+SUM_BLOCK = 1 << 13
 
 
 @dataclass
@@ -60,8 +62,8 @@ class Scene:
         references at any resolution follow from these six numbers
         (:func:`tracer.measure.footprint.expected_refs`); computed once per scene."""
         p, e = np.zeros(3), np.zeros(3)
-        for s in range(0, self.n, 1 << 13):  # in blocks: a float64 copy of a large mesh stays small
-            t = self.tris[s:s + (1 << 13)].astype(np.float64)
+        for s in range(0, self.n, SUM_BLOCK):
+            t = self.tris[s:s + SUM_BLOCK].astype(np.float64)
             p += np.abs(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])).sum(axis=0)
             e += (t.max(axis=1) - t.min(axis=1)).sum(axis=0)
         return p, e
