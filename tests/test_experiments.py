@@ -304,6 +304,19 @@ def test_unsettled_keeps_timing_the_targets_the_two_fastest_and_the_others():
     noisy[1] += [1.1] * 4                                            # 1 timed 4 rounds longer than 2
     noisy[0] += [1.0] * 4
     assert _unsettled([1], 2.0)(noisy) == {0, 1, "one_level"}
+    # a settled target drops out while an unsettled one is still timed against the best
+    quiet = {0: list(1.0 + 0.001 * rng.standard_normal(11)), 1: list(1.1 + 0.001 * rng.standard_normal(11)),
+             2: list(1.5 + 0.3 * rng.random(11)), 3: list(2.0 + 0.001 * rng.standard_normal(11))}
+    assert _unsettled([1, 2, 3], 2.0)(quiet) == {0, 1, 2}
+    assert _unsettled([1, 3], 2.0)(quiet) == set()
+    quiet[3] = quiet[3][:5]                                          # 3 dropped out earlier: not asked again
+    assert _unsettled([3], 2.0)(quiet) == set()
+    # futility: an interval that 41 rounds would not narrow enough is given up from 21 rounds on
+    far = {0: list(1.0 + 0.3 * rng.random(21)), 1: list(1.2 + 0.3 * rng.random(21))}
+    assert (penalty_ci(far, 1, 0)[1] - penalty_ci(far, 1, 0)[0]) / 2 * np.sqrt(21 / 41) > 2.0
+    assert _unsettled([1], 2.0)(far) == {0, 1}
+    assert _unsettled([1], 2.0, 41)(far) == set()
+    assert _unsettled([1], 2.0, 41)({k: v[:20] for k, v in far.items()}) == {0, 1}  # too few rounds to judge
     r = np.asarray(noisy[2]) / np.asarray(noisy[0][:11])
     assert paired_ratio(noisy, 2, 0) == (float(np.median(r)), float(r.min()), float(r.max()))
     assert penalty_ci(noisy, 2, 0) == penalty_ci({2: noisy[2], 0: noisy[0][:11]}, 2, 0)

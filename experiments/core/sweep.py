@@ -134,6 +134,17 @@ QUICK_PAIRED_ROUNDS, QUICK_PAIRED_REPEATS = 3, 3
 #: PAIRED_HALF_WIDTH_PCT wide each side (or PAIRED_MAX_ROUNDS are timed); on a noisy host 11 rounds
 #: cannot tell a 5 % penalty from none
 PAIRED_MAX_ROUNDS, PAIRED_HALF_WIDTH_PCT = 41, 2.0
+#: rounds before an interval's width is trusted enough to give up on it (:func:`_unsettled`): with
+#: fewer, the binomial interval of a median spans most of the rounds' range and overstates the noise
+FUTILE_AFTER = 21
+
+
+def paired_rule() -> str:
+    """The stop rule of full-run paired penalties in words, for the summaries that show them."""
+    return (f"after {PAIRED_ROUNDS} rounds, rounds are added until every interval is within "
+            f"±{PAIRED_HALF_WIDTH_PCT:g} points or {PAIRED_MAX_ROUNDS} are timed; a settled target is no longer "
+            f"timed, and one that {PAIRED_MAX_ROUNDS} rounds would still leave wider (judged from "
+            f"{FUTILE_AFTER} rounds on) is given up with its wider interval")
 
 
 def _paired_budget(quick: bool) -> tuple[int, int, dict]:
@@ -152,22 +163,30 @@ def penalty_ci(times: dict, target, best) -> tuple[float, float]:
     return penalty_pct(lo, 1.0), penalty_pct(hi, 1.0)
 
 
-def _unsettled(targets, half_width_pct: float):
+def _unsettled(targets, half_width_pct: float, max_rounds: int | None = None):
     """``more`` of :func:`tracer.measure.timing.time_paired`: while the interval of some target's
     penalty against the current best (fastest by median among the points still timed; against the
     next fastest for the best itself) is wider than ``half_width_pct`` on either side, the names to
-    time in one more round: the targets, the two fastest and every non-point (``others``). A
-    candidate that is none of these drops out, as its rounds no longer narrow any target's interval
-    (empty: settled)."""
+    time in one more round: the unsettled targets, the two fastest and every non-point (``others``).
+    A settled target or a candidate that is none of these drops out, as its rounds no longer narrow
+    any unsettled interval; its penalty stays the one of the rounds it was timed in (empty: all
+    settled).
+
+    Futility: from FUTILE_AFTER rounds on, a target whose interval would still be too wide after
+    ``max_rounds`` rounds, were it to shrink as 1/sqrt(rounds), is given up rather than timed to the
+    cap; its wider interval is what is reported."""
     def more(times: dict) -> set:
         n = max(len(v) for v in times.values())
         med = {i: float(np.median(v)) for i, v in times.items() if isinstance(i, int) and len(v) == n}
         order = sorted(med, key=med.get)
-        for i in targets:
+        wide = set()
+        for i in (t for t in targets if t in med):  # a target that dropped out was settled
             lo, hi = penalty_ci(times, i, order[1] if i == order[0] and len(order) > 1 else order[0])
-            if (hi - lo) / 2.0 > half_width_pct:
-                return set(targets) | set(order[:2]) | {k for k in times if not isinstance(k, int)}
-        return set()
+            hw = (hi - lo) / 2.0
+            hopeless = max_rounds is not None and n >= FUTILE_AFTER and hw * np.sqrt(n / max_rounds) > half_width_pct
+            if hw > half_width_pct and not hopeless:
+                wide.add(i)
+        return wide | set(order[:2]) | {k for k in times if not isinstance(k, int)} if wide else set()
     return more
 
 
@@ -188,7 +207,7 @@ def paired_penalties(scene, structure: str, targets: dict, candidates: list[dict
     for p in list(targets.values()) + list(candidates):
         if p not in points:
             points.append(p)
-    spec = {"paired": 1, "scene": scene.name, "N": scene.n, "structure": structure, "targets": targets,
+    spec = {"paired": 2, "scene": scene.name, "N": scene.n, "structure": structure, "targets": targets,
             "points": points, "rays": [rays.n, rays.seed, rays.kind], "rounds": rounds, "repeats": repeats,
             **timing, **({"others": others} if others else {})}
     with store.claim(spec):
@@ -205,13 +224,16 @@ def _paired_penalties(scene, structure, targets, points, rays, store, spec, roun
     tp, prov = _run(store, _time_side_by_side, scene, structure, points, rays, rounds, repeats, others,
                     timing.get("min_sample"), adapt)
     med = {i: float(np.median(v)) for i, v in tp.items() if isinstance(i, int)}
-    best = min(med, key=med.get)
+    # the best among the points timed to the end, as :func:`_unsettled` chose it: a point that dropped
+    # out has fewer rounds, and a median over fewer rounds is not compared with one over more
+    n = max(len(tp[i]) for i in med)
+    best = min((i for i in med if len(tp[i]) == n), key=med.get)
     out = {}
     for name, p in targets.items():
         i = points.index(p)
         fastest_ = i == best and len(med) > 1
         # the fastest point against itself says nothing: its range is against the next fastest
-        other = min((j for j in med if j != i), key=med.get) if fastest_ else best
+        other = min((j for j in med if j != i and len(tp[j]) == n), key=med.get) if fastest_ else best
         ratio, lo, hi = paired_ratio(tp, i, other)
         out[name] = {"penalty_pct": 0.0 if fastest_ else penalty_pct(ratio, 1.0), "min_pct": penalty_pct(lo, 1.0),
                      "max_pct": penalty_pct(hi, 1.0), "fastest": bool(fastest_), "ci_pct": list(penalty_ci(tp, i, other)),
@@ -239,7 +261,7 @@ def _time_side_by_side(scene, structure, points, rays, rounds, repeats, others=N
     accels = {i: build(scene, structure, **p) for i, p in enumerate(points)}
     for name, (st, p) in (others or {}).items():
         accels[name] = build(scene, st, **p)
-    more = dict(more=_unsettled(adapt[0], adapt[2]), max_rounds=adapt[1]) if adapt else {}
+    more = dict(more=_unsettled(adapt[0], adapt[2], adapt[1]), max_rounds=adapt[1]) if adapt else {}
     return time_paired({i: (lambda a=a: a.intersect(rays.origins, rays.directions, counters=False))
                         for i, a in accels.items()}, rounds=rounds, repeats=repeats,
                        min_sample=MIN_SAMPLE_SECONDS if min_sample is None else min_sample, **more)

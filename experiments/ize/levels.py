@@ -10,7 +10,7 @@ import pandas as pd
 
 from experiments.core.common import add_ray_args, dash
 from experiments.core.figures import finish_log_panels, subplots
-from experiments.core.sweep import FULL_FACTORS, grid_cells, paired_penalties, penalty_pct, penalty_range, sweep
+from experiments.core.sweep import FULL_FACTORS, grid_cells, paired_penalties, paired_rule, penalty_pct, penalty_range, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
 from costmodel.derive_nested import d_level_m1
 from costmodel.papers import ize2007
@@ -122,7 +122,7 @@ def _summary(tab, n_rays, repeats, threads, quick) -> str:
              f"Sweep ({repeats} rounds beside the scene's 8N grid per point): {sweep_txt}. Then per L and ray kind the "
              "theory's M1, the two fastest swept M1 of the same L and the fastest swept one-level grid are re-timed "
              "side by side in interleaved rounds (median of per-round ratios; in brackets its 95 % interval and the "
-             "rounds timed: rounds are added, from 11 up to 41, until every interval is within ±2 points).", "",
+             f"rounds timed: {paired_rule()}).", "",
              "Columns: **penalty** = time of the theory's M1 over the fastest M1 of the same L (paired, %); "
              "**speed-up** = time of the fastest swept one-level grid over the theory's L-level grid (paired, x); "
              "**L3/L2** = the L = 3 speed-up divided by the L = 2 speed-up (> 1: three levels faster; the two "

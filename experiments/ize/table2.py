@@ -20,7 +20,7 @@ from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
 from experiments.core.store import read_csv
 from experiments.core.sweep import (penalty_range, FULL_FACTORS, QUICK_FACTORS, fastest, grid_cells, nearest, paired_penalties,
-                               penalty_pct, sweep)
+                               paired_rule, penalty_pct, sweep)
 from experiments.core.target import begin, kind_rays, run_quiet
 from tracer.accel.constants import IZE_TI_OVER_TS
 from tracer.measure.timing import clock_name
@@ -183,8 +183,8 @@ def _summary(tab, fit_df, cfit, ratio, n_rays, repeats, threads, seed, pool) -> 
         f"condition number {cfit.cond_:.1f}) — the paper's is 4, giving M = 8N.", "",
         "Penalties are re-measured side by side: the theory's M and the three fastest swept M are timed in "
         "interleaved rounds, and the penalty is the median over rounds of the theory's time over the fastest's "
-        "(in brackets its 95 % interval and the rounds timed: after 11, rounds are added until every interval is "
-        "within ±2 points or 41 are timed; 0 when the theory's M is itself the fastest). The sweep's own "
+        f"(in brackets its 95 % interval and the rounds timed: {paired_rule()}; 0 when the theory's M is itself "
+        "the fastest). The sweep's own "
         "penalty (each point timed beside the scene's 8N grid, minutes apart from the others; its minimum, "
         "the lowest of many noisy points, is biased low) is in the last column.", "",
         f"One (Ts, Ti) pair for all scenes, or one per scene? AIC on the relative residuals: pooled "

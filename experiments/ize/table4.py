@@ -10,7 +10,7 @@ from costmodel.papers import ize2007
 from costmodel.fit import refine_minimum
 from experiments.core.common import add_ray_args, dash, dash_int
 from experiments.core.figures import finish_log_panels, subplots
-from experiments.core.sweep import penalty_range, FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, penalty_pct, sweep
+from experiments.core.sweep import penalty_range, FULL_FACTORS, QUICK_FACTORS, grid_cells, paired_penalties, paired_rule, penalty_pct, sweep
 from experiments.core.target import begin, kind_rays, run_quiet
 from experiments.ize.lib import memmodel
 
@@ -116,7 +116,7 @@ def _summary(tab, n_rays, repeats, threads) -> str:
              f"{threads} thread(s). Sweep of M1 from (8N)^0.6/16 to 16 (8N)^0.6 with M2 = 8 N2. The penalty and "
              "the speed-up are re-timed side by side: the theory's M1, the three fastest swept M1 and the best "
              "one-level grid in interleaved rounds (median per-round ratio; in brackets its 95 % interval and the rounds "
-             "timed: rounds are added, from 11 up to 41, until every interval is within ±2 points). The best one-level "
+             f"timed: {paired_rule()}). The best one-level "
              "grid is the fastest point of the one-level sweep (N/8 … 64N, 19 points) that table2 and ize-levels "
              "share point for point (same rays, same stored points); table2's best M is that minimum refined by a "
              "parabola in log M, so it may lie between two swept points.", "",
