@@ -65,10 +65,7 @@ import math
 import time
 
 import numpy as np
-from llvmlite import ir
-from numba import prange, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import prange
 
 from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
@@ -78,6 +75,7 @@ from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.accel.kdtree_clip import kd_build_clip
+from tracer.accel.simd import prefetch
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import check_budget, fmt_bytes, memory_budget, working_set
 
@@ -91,23 +89,6 @@ def pbrt_max_depth(n: int) -> int:
 
 
 # ---------------------------------------------------------------- traversal
-@intrinsic
-def prefetch(typingctx, arr, idx):
-    """``prefetch(a, i)``: hint the CPU to load the cache line of ``a.ravel()[i]`` (LLVM's
-    ``llvm.prefetch``, read, high locality). Never faults, also for an index past the end."""
-    sig = types.void(arr, idx)
-
-    def codegen(context, builder, signature, args):
-        ary = context.make_array(signature.args[0])(context, builder, args[0])
-        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), ir.IntType(8).as_pointer())
-        i32 = ir.IntType(32)
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]), "llvm.prefetch.p0")
-        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
-        return context.get_dummy_value()
-    return sig, codegen
-
-
 @jit(inline="always")
 def _slab_clip(lo, hi, o, inv, t0, t1):
     """Clip [t0, t1] to one slab of the root box (float64; a NaN product is ignored)."""

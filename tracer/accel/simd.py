@@ -1,6 +1,6 @@
 """Four-lane float32 operations that Numba does not vectorise by itself, as LLVM vector IR
 (:func:`numba.extending.intrinsic`): the slab test of the four (eight) child boxes of a 4-wide (8-wide)
-BVH node, and the bit counts of its hit mask.
+BVH node, the bit counts of its hit mask, and a cache-line prefetch.
 
 Numba compiles the four box tests of :func:`tracer.accel.bvh4.bvh4_chunk` written as a loop to 48 scalar
 subtractions and multiplications and 24 scalar min/max (``vsubss``/``vmulss``/``vmaxss``: LLVM's
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 from numba import types
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 _F32 = ir.FloatType()
@@ -97,4 +98,21 @@ def popc(typingctx, x):
     def codegen(context, builder, signature, args):
         return builder.ctpop(args[0])
 
+    return sig, codegen
+
+
+@intrinsic
+def prefetch(typingctx, arr, idx):
+    """``prefetch(a, i)``: hint the CPU to load the cache line of ``a.ravel()[i]`` (LLVM's
+    ``llvm.prefetch``, read, high locality). Never faults, also for an index past the end."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]), "llvm.prefetch.p0")
+        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
     return sig, codegen
