@@ -28,15 +28,19 @@ def scene(name: str) -> Scene:
     return load_scene(name)
 
 
+BOXES = ("float", "quant")
+
+
 @lru_cache(maxsize=None)
-def accel(name: str, width: int, max_leaf: int = 4):
-    return build(scene(name), "wbvh", width=width, max_leaf=max_leaf)
+def accel(name: str, width: int, max_leaf: int = 4, boxes: str = "float"):
+    return build(scene(name), "wbvh", width=width, max_leaf=max_leaf, boxes=boxes)
 
 
+@pytest.mark.parametrize("boxes", BOXES)
 @pytest.mark.parametrize("name", ["bunny-948", "cornell", "bunny-far"])
 @pytest.mark.parametrize("width", WIDTHS)
-def test_closest_hits_match_oracle_all_kinds(width, name):
-    a = accel(name, width)
+def test_closest_hits_match_oracle_all_kinds(width, name, boxes):
+    a = accel(name, width, boxes=boxes)
     for kind in KINDS:
         r = make_rays(scene(name), kind, NRAYS, seed=11)
         hits, cnt = a.intersect(r.origins, r.directions)
@@ -97,8 +101,9 @@ def test_rays_lying_in_box_planes(width, name):
     a = accel(name, width)
     o, d = _plane_rays(a, sc, 3000, seed=3)
     ref, ties = oracle_intersect(sc, o, d)
-    res = assert_agrees_exactly(a.intersect(o, d)[0], ref, ties, (width, name))
-    assert res["hits"] > 300, res
+    for boxes in BOXES:  # the float boxes' planes; the quantised ones lie at or outside them
+        res = assert_agrees_exactly(accel(name, width, boxes=boxes).intersect(o, d)[0], ref, ties, (width, name, boxes))
+        assert res["hits"] > 300, res
 
 
 @pytest.mark.parametrize("width", WIDTHS)
@@ -111,8 +116,9 @@ def test_occluded_matches_oracle_within_tmax(width):
     ext = float(np.linalg.norm(sc.bounds[1] - sc.bounds[0]))
     tmax = np.where(hit, ref.t * rng.uniform(0.5, 1.5, len(hit)), ext * rng.uniform(0, 2, len(hit))).astype(np.float32)
     want = oracle_intersect(sc, r.origins, r.directions, tmax=tmax)[0].tri_id >= 0
-    got = accel("bunny-948", width).occluded(r.origins, r.directions, tmax)
-    assert np.array_equal(got, want), np.flatnonzero(got != want)[:10]
+    for boxes in BOXES:
+        got = accel("bunny-948", width, boxes=boxes).occluded(r.origins, r.directions, tmax)
+        assert np.array_equal(got, want), (boxes, np.flatnonzero(got != want)[:10])
     assert 0 < want.sum() < hit.sum()
 
 
@@ -179,11 +185,60 @@ def test_small_and_empty_scenes():
     one = Scene(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), "one")
     o = np.array([[0.25, 0.25, 1.0], [0.25, 0.25, -1.0], [2.0, 2.0, 1.0]], np.float32)
     d = np.array([[0, 0, -1], [0, 0, 1], [0, 0, -1]], np.float32)
-    for w in WIDTHS:
-        a = build(one, "wbvh", width=w)
+    for w, boxes in ((w, b) for w in WIDTHS for b in BOXES):
+        a = build(one, "wbvh", width=w, boxes=boxes)
         hits, _ = a.intersect(o, d)
         assert list(hits.tri_id) == [0, 0, -1] and hits.t[0] == 1.0 and hits.t[1] == 1.0
         assert list(a.occluded(o, d, tmax=[2.0, 0.5, 2.0])) == [True, False, False]
     empty = Scene(np.zeros((0, 3, 3), np.float32), "empty", bounds=np.array([[0, 0, 0], [1, 1, 1]], np.float32))
     hits, cnt = build(empty, "wbvh").intersect(o, d)
     assert np.all(hits.tri_id == -1) and cnt.total()["tests"] == 0
+
+
+@pytest.mark.parametrize("name", ["bunny-948", "bunny-far", "cornell"])
+@pytest.mark.parametrize("width", WIDTHS)
+def test_quantised_boxes_hold_the_float_boxes(width, name):
+    """Each decoded child box (g + float32(q) s, float32 roundings as the kernel's) holds its float32
+    box; empty slots decode inverted and point to an empty leaf; child words and orders are the
+    float records'. On random rays the quantised layout visits at least the float layout's nodes,
+    and gives the same t bits and ids."""
+    from tracer.accel.wide_quant import QMAX, child_word, order_byte, qnode_words
+    f, q = accel(name, width), accel(name, width, boxes="quant")
+    w, nodes, qn = f.width_, f.nodes_, q.qnodes_
+    assert qn.shape == (len(nodes), qnode_words(w, NORD)) and qn.shape[1] == (32 if w == 8 else 22)
+    boxes = nodes.view(np.float32)[:, :6 * w].reshape(-1, 6, w)
+    valid = np.isfinite(boxes[:, 0, :])
+    g = qn.view(np.float32)[:, 0:3]
+    st = qn.view(np.float32)[:, 3:6]
+    planes = qn.view(np.uint8)[:, 24:24 + 6 * w].reshape(-1, 6, w)
+    dec = (np.tile(g, 2)[:, :, None] + planes.astype(np.float32) * np.tile(st, 2)[:, :, None]).astype(np.float32)
+    assert dec.dtype == np.float32
+    assert np.all(dec[:, :3][np.broadcast_to(valid[:, None], (len(qn), 3, w))]
+                  <= boxes[:, :3][np.broadcast_to(valid[:, None], (len(qn), 3, w))])
+    assert np.all(dec[:, 3:][np.broadcast_to(valid[:, None], (len(qn), 3, w))]
+                  >= boxes[:, 3:][np.broadcast_to(valid[:, None], (len(qn), 3, w))])
+    assert np.all(planes[:, :3][~np.broadcast_to(valid[:, None], (len(qn), 3, w))] == QMAX)
+    assert np.all(planes[:, 3:][~np.broadcast_to(valid[:, None], (len(qn), 3, w))] == 0)
+    cw = child_word(w)
+    assert np.array_equal(qn[:, cw:cw + w][valid], nodes[:, 6 * w:7 * w][valid])
+    assert np.all(qn[:, cw:cw + w][~valid] == -1)
+    ob = qn.view(np.uint8)[:, order_byte(w):order_byte(w) + 3 * NORD].reshape(-1, NORD, 3).astype(np.int64)
+    assert np.array_equal(ob[:, :, 0] | ob[:, :, 1] << 8 | ob[:, :, 2] << 16, nodes[:, 7 * w:])
+    # a plane is at most one step (and float32 round-off) outside its float box
+    wide = np.where(valid[:, None], boxes[:, 3:] - boxes[:, :3], 0)
+    ulp = np.spacing(np.maximum(np.abs(dec[:, :3]), np.abs(dec[:, 3:])))
+    assert np.all(((dec[:, 3:] - dec[:, :3]) - wide <= 2.01 * st[:, :, None] + 4 * ulp)[
+        np.broadcast_to(valid[:, None], (len(qn), 3, w))])
+    r = make_rays(scene(name), "random", NRAYS, seed=8)
+    hf, cf = f.intersect(r.origins, r.directions)
+    hq, cq = q.intersect(r.origins, r.directions)
+    assert np.array_equal(hf.tri_id, hq.tri_id) and np.array_equal(hf.t.view(np.int32), hq.t.view(np.int32))
+    assert np.all(cq["nodes"] >= cf["nodes"]) and np.all(cq["tests"] >= cf["tests"])
+    assert cq.total()["nodes"] <= 1.5 * cf.total()["nodes"]  # a byte a plane: few extra visits
+    assert q.stats()["memory_bytes"] < f.stats()["memory_bytes"] and q.stats()["boxes"] == "quant"
+
+
+def test_quantised_layout_rejects_unknown_boxes():
+    from tracer.errors import GridcostError
+    with pytest.raises(GridcostError, match="boxes"):
+        build(scene("bunny-948"), "wbvh", boxes="half")

@@ -52,6 +52,8 @@ VARIANTS = {
     # Embree's choice, the wide BVH's default before: leaves of up to 4 triangles, a node priced as one
     # leaf block; paired beside the default so each run shows what the fitted choice gains on its mesh
     "wbvh-leaf4": ("wbvh", {"max_leaf": 4, "trav_cost": 1.0}),
+    # the same tree with child boxes quantised to a byte a plane (128-byte nodes, tracer.accel.wide_quant)
+    "wbvh-quant": ("wbvh", {"boxes": "quant"}),
     "cgt": ("cgt", {}),
     "sortedlists": ("sortedlists", {}),
 }
@@ -63,7 +65,7 @@ def default_names() -> list[str]:
 
 
 #: the structures whose Embree ratio is also measured in interleaved rounds (the headline ratios)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "wbvh-leaf4", "cgt")
+PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "wbvh-leaf4", "wbvh-quant", "cgt")
 
 
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,

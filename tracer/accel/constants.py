@@ -41,3 +41,12 @@ HAPALA_EPS = 0.01
 WIDE_TRAV_COST = 2.0
 WIDE_MAX_LEAF = 8
 WIDE_BLOCK = 4
+#: the wide BVH's child boxes: "float" (float32 planes, 256-byte 8-wide nodes) or "quant" (one byte a
+#: plane against the node's origin and step, 128-byte nodes: Embree's compressed nodes, tinybvh's CWBVH;
+#: tracer.accel.wide_quant). The box test meets a superset of the float layout's children, so t and id
+#: are unchanged and only the visits and the time move. It does not pay here: the nodes are a quarter of
+#: the working set (the leaves' float32 blocks are the rest; bunny-69k 3.7 -> 3.2 MiB), visits rise 1-2 %,
+#: and the decode costs more than the halved node loads save. Paired quant/float time (1 thread, 100k
+#: rays, 9 rounds): bunny-69k 1.07 random / 1.13 camera, dragon-202k 1.07/1.09, dragon-871k 1.00/1.06,
+#: fandisk-x16 1.02/1.12. ``gridcost bench`` pairs ``wbvh-quant`` beside the default on every mesh.
+WIDE_BOXES = "float"

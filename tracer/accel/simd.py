@@ -21,8 +21,9 @@ _F32 = ir.FloatType()
 _I32 = ir.IntType(32)
 
 
-def _slab_codegen(width):
-    """Codegen of the ``width``-lane slab test (see :func:`slab4`)."""
+def _slab_codegen(width, quant=False):
+    """Codegen of the ``width``-lane slab test (see :func:`slab4`); ``quant``: the planes are bytes
+    decoded as ``g + q s`` per axis (see :func:`slabq8`)."""
     vt = ir.VectorType(_F32, width)
 
     def splat(builder, x):
@@ -30,18 +31,28 @@ def _slab_codegen(width):
         return builder.shuffle_vector(v, ir.Constant(vt, ir.Undefined), ir.Constant(ir.VectorType(_I32, width), [0] * width))
 
     def codegen(context, builder, signature, args):
-        (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, aox, aoy, aoz, ajx, ajy, ajz, atlo, athi, atol,
-         at4) = args
+        if quant:
+            (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, agx, agy, agz, asx, asy, asz, aox, aoy, aoz,
+             ajx, ajy, ajz, atlo, athi, atol, at4) = args
+        else:
+            (anf, abase, anxo, afxo, anyo, afyo, anzo, afzo, aox, aoy, aoz, ajx, ajy, ajz, atlo, athi, atol,
+             at4) = args
+            agx = agy = agz = asx = asy = asz = None
         ary = context.make_array(signature.args[0])(context, builder, anf)
-        out = context.make_array(signature.args[17])(context, builder, at4)
+        out = context.make_array(signature.args[-1])(context, builder, at4)
         vptr = vt.as_pointer()
 
-        def planes(off):
+        def planes(off, g, sc):
             p = builder.gep(ary.data, [builder.add(abase, off)])
-            return builder.load(builder.bitcast(p, vptr), align=4)
+            if not quant:
+                return builder.load(builder.bitcast(p, vptr), align=4)
+            # W bytes -> float32 lanes, then g + q * s: float32 multiply, then add (no fused
+            # multiply-add: the build checks the same two roundings, wide_quant.quantize)
+            q = builder.load(builder.bitcast(p, ir.VectorType(ir.IntType(8), width).as_pointer()), align=1)
+            return builder.fadd(splat(builder, g), builder.fmul(builder.uitofp(q, vt), splat(builder, sc)))
 
-        def dist(off, o, j):
-            return builder.fmul(builder.fsub(planes(off), splat(builder, o)), splat(builder, j))
+        def dist(off, o, j, g, sc):
+            return builder.fmul(builder.fsub(planes(off, g, sc), splat(builder, o)), splat(builder, j))
 
         def gt(t, a):  # a if a > t else t
             return builder.select(builder.fcmp_ordered(">", a, t), a, t)
@@ -49,8 +60,10 @@ def _slab_codegen(width):
         def lt(t, a):  # a if a < t else t
             return builder.select(builder.fcmp_ordered("<", a, t), a, t)
 
-        tn = gt(gt(gt(splat(builder, atlo), dist(anxo, aox, ajx)), dist(anyo, aoy, ajy)), dist(anzo, aoz, ajz))
-        tf = lt(lt(lt(splat(builder, athi), dist(afxo, aox, ajx)), dist(afyo, aoy, ajy)), dist(afzo, aoz, ajz))
+        tn = gt(gt(gt(splat(builder, atlo), dist(anxo, aox, ajx, agx, asx)), dist(anyo, aoy, ajy, agy, asy)),
+                dist(anzo, aoz, ajz, agz, asz))
+        tf = lt(lt(lt(splat(builder, athi), dist(afxo, aox, ajx, agx, asx)), dist(afyo, aoy, ajy, agy, asy)),
+                dist(afzo, aoz, ajz, agz, asz))
         hit = builder.fcmp_ordered("<=", tn, builder.fadd(tf, splat(builder, atol)))
         builder.store(tn, builder.bitcast(out.data, vptr), align=4)
         bits = builder.bitcast(hit, ir.IntType(width))
@@ -77,6 +90,26 @@ def slab8(typingctx, nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy,
     entries into ``t8`` (float32[8]), an 8-bit mask."""
     sig = types.int64(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tlo, thi, tol, t8)
     return sig, _slab_codegen(8)
+
+
+@intrinsic
+def slabq4(typingctx, nb, base, nxo, fxo, nyo, fyo, nzo, fzo, gx, gy, gz, sx, sy, sz, ox, oy, oz, jx, jy, jz,
+           tlo, thi, tol, t4):
+    """:func:`slab4` on quantised boxes: plane ``off`` of box k is the byte ``q = nb[base + off + k]``
+    (uint8) decoded as ``g + float32(q) * s`` with the axis' origin ``g`` and step ``s`` (float32
+    multiply, then add), then tested exactly as :func:`slab4` tests float32 planes."""
+    sig = types.int64(nb, base, nxo, fxo, nyo, fyo, nzo, fzo, gx, gy, gz, sx, sy, sz, ox, oy, oz, jx, jy, jz,
+                      tlo, thi, tol, t4)
+    return sig, _slab_codegen(4, quant=True)
+
+
+@intrinsic
+def slabq8(typingctx, nb, base, nxo, fxo, nyo, fyo, nzo, fzo, gx, gy, gz, sx, sy, sz, ox, oy, oz, jx, jy, jz,
+           tlo, thi, tol, t8):
+    """:func:`slabq4` on eight boxes."""
+    sig = types.int64(nb, base, nxo, fxo, nyo, fyo, nzo, fzo, gx, gy, gz, sx, sy, sz, ox, oy, oz, jx, jy, jz,
+                      tlo, thi, tol, t8)
+    return sig, _slab_codegen(8, quant=True)
 
 
 @intrinsic

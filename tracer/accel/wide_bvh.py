@@ -39,12 +39,13 @@ from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
-from tracer.accel.simd import ctz, popc, prefetch, slab4, slab8
+from tracer.accel.simd import ctz, popc, prefetch, slab4, slab8, slabq4, slabq8
+from tracer.accel.wide_quant import HEADER, ORDER_BYTES, quantize
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.errors import GridcostError
 from tracer.measure.memory import check_budget, working_set
 from tracer.measure.provenance import bvh_width
-from tracer.accel.constants import WIDE_BLOCK, WIDE_MAX_LEAF, WIDE_TRAV_COST
+from tracer.accel.constants import WIDE_BLOCK, WIDE_BOXES, WIDE_MAX_LEAF, WIDE_TRAV_COST
 
 #: order words per node (one per octant of direction signs)
 NORD = 8
@@ -237,15 +238,15 @@ def leaf_blocks(info, tv, order):
 @jit(inline="always")
 def _prefetch_entry(ni, tri, words, c):
     """Start the loads of a pending stack entry, so they overlap the work done before it is popped:
-    a node's four cache lines, or the first block of a leaf (144 bytes, up to three lines).
+    a node's cache lines (``words`` int32 words), or the first block of a leaf (144 bytes, up to three lines).
     Paired against no prefetch, 1 thread: 0.92-0.99x the time on seven meshes (dragon-871k random
     0.92), none slower."""
     if c >= 0:
         b = words * np.uintp(c)
-        prefetch(ni, b)
-        prefetch(ni, b + np.uintp(16))
-        prefetch(ni, b + np.uintp(32))
-        prefetch(ni, b + np.uintp(48))
+        k = np.uintp(0)
+        while k < words:
+            prefetch(ni, b + k)
+            k += np.uintp(16)
     else:
         b = np.uintp(TRI4_WORDS) * np.uintp((-1 - c) >> 4)
         prefetch(tri, b)
@@ -254,19 +255,27 @@ def _prefetch_entry(ni, tri, words, c):
 
 
 @jit
-def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4, stack_size,
+def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, ids4, stack_size,
                out_t, out_id, counters):
     """Trace rays lo..hi-1 with one stack. ``ni``/``nf``: flat int32 / float32 views of the node records;
-    ``tri``: flat float32 blocks of four triangles; ``ids4`` flat."""
+    ``nq`` their uint8 view for the quantised records (:mod:`tracer.accel.wide_quant`), None for the
+    float ones (Numba compiles each layout on its own); ``tri``: flat float32 blocks of four
+    triangles; ``ids4`` flat."""
     sc = np.empty(stack_size, np.int64)
     st = np.empty(stack_size, np.float64)
     tb = np.empty(8, np.float32)
     t4 = np.empty(4, np.float64)
     tmin32 = np.float32(tmin)
+    one, two, three, four, five = np.uintp(1), np.uintp(2), np.uintp(3), np.uintp(4), np.uintp(5)
     Wu = np.uintp(W)
-    words = np.uintp(7 * W + NORD)
-    cw = np.uintp(6 * W)
-    ow = np.uintp(7 * W)
+    if nq is None:  # words per record, offset of the child words, of the order words
+        words = np.uintp(7 * W + NORD)
+        cw = np.uintp(6 * W)
+        ow = np.uintp(7 * W)
+    else:  # ... of the child words, and the byte offset of the orders
+        cw = np.uintp(HEADER + 6 * W // 4)
+        ow = np.uintp(4) * (cw + Wu)
+        words = cw + Wu + np.uintp((NORD * ORDER_BYTES + 3) // 4)
     for i in range(lo, hi):
         px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
         best_id = -1
@@ -290,7 +299,7 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4
             fyo = np.uintp(4) * Wu - Wu * sy
             nzo = np.uintp(2) * Wu + Wu * sz
             fzo = np.uintp(5) * Wu - Wu * sz
-            octant = ow + (np.uintp(1) if sx else np.uintp(0)) + (np.uintp(2) if sy else np.uintp(0)) \
+            octant = (np.uintp(1) if sx else np.uintp(0)) + (np.uintp(2) if sy else np.uintp(0)) \
                 + (np.uintp(4) if sz else np.uintp(0))
             sp = 0
             c = 0
@@ -320,7 +329,17 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4
                 else:
                     base = words * np.uintp(c)
                     lim = np.float32(best + tol)
-                    if W == 8:
+                    if nq is not None:
+                        qb = np.uintp(4) * base + np.uintp(4 * HEADER)
+                        if W == 8:
+                            mask = slabq8(nq, qb, nxo, fxo, nyo, fyo, nzo, fzo, nf[base], nf[base + one],
+                                          nf[base + two], nf[base + three], nf[base + four], nf[base + five],
+                                          ox, oy, oz, jx, jy, jz, tmin32, lim, tol32, tb)
+                        else:
+                            mask = slabq4(nq, qb, nxo, fxo, nyo, fyo, nzo, fzo, nf[base], nf[base + one],
+                                          nf[base + two], nf[base + three], nf[base + four], nf[base + five],
+                                          ox, oy, oz, jx, jy, jz, tmin32, lim, tol32, tb)
+                    elif W == 8:
                         mask = slab8(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tmin32, lim,
                                      tol32, tb)
                     else:
@@ -332,7 +351,12 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4
                         if nh == 1:  # one child met: visit it, no stack
                             c = ni[base + cw + np.uintp(ctz(mask))]
                         else:  # the met children near to far from the order word; nearest on top
-                            perm = ni[base + octant]
+                            if nq is None:
+                                perm = np.int64(ni[base + ow + octant])
+                            else:
+                                ob = np.uintp(4) * base + ow + np.uintp(ORDER_BYTES) * octant
+                                perm = np.int64(nq[ob]) | (np.int64(nq[ob + one]) << 8) \
+                                    | (np.int64(nq[ob + two]) << 16)
                             top = sp + nh - 1
                             j = top
                             while True:
@@ -361,7 +385,7 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4
 
 
 @pjit
-def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4, stack_size, out_t, out_id,
+def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, ids4, stack_size, out_t, out_id,
                counters, nt):
     """Batched wide-BVH traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of
     BLOCK rays (:data:`tracer.accel._jit.BLOCK`), one stack per block; ``counters`` or None (the
@@ -369,7 +393,7 @@ def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, tri, ids4, stack_
     m = O.shape[0]
     for th in prange(nt):
         for b in range(th, nblocks(m), nt):
-            wide_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, W, ni, nf,
+            wide_chunk(b * BLOCK, min(m, (b + 1) * BLOCK), O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq,
                        tri, ids4, stack_size, out_t, out_id, counters)
 
 
@@ -384,8 +408,11 @@ class WideBVH(TreeTraceMixin, Accel):
                       "tests": "ray/triangle tests (triangles of the leaves visited)",
                       "nodes": "nodes visited (leaves included)"}
 
-    def __init__(self, width=None, bins=32, max_leaf=WIDE_MAX_LEAF, trav_cost=WIDE_TRAV_COST):
+    def __init__(self, width=None, bins=32, max_leaf=WIDE_MAX_LEAF, trav_cost=WIDE_TRAV_COST, boxes=WIDE_BOXES):
+        if boxes not in ("float", "quant"):
+            raise GridcostError(f"wide BVH boxes must be 'float' or 'quant', got {boxes!r}")
         self.width, self.bins, self.max_leaf, self.trav_cost = width, bins, max_leaf, trav_cost
+        self.boxes = boxes
 
     def build(self, scene):
         n = scene.n
@@ -404,6 +431,7 @@ class WideBVH(TreeTraceMixin, Accel):
         self.scene_name_ = scene.name
         if n == 0:
             self.nodes_ = np.zeros((0, node_words(w)), np.int32)
+            self.qnodes_ = None
             self.tri4_, self.ids4_ = np.zeros((0, TRI4_WORDS), np.float32), np.zeros((0, 4), np.int32)
             self.depth_, self.leaves_, self.diag_ = 0, 0, 0.0
             self.build_seconds_ = time.perf_counter() - t_start
@@ -418,6 +446,8 @@ class WideBVH(TreeTraceMixin, Accel):
         self.tri4_ = aligned(tri4)
         nodes, depth = collapse(nb, info, w, leaf_word)
         self.nodes_ = aligned(nodes)
+        # the layout traced: the float records, or the same tree quantised (one byte a plane)
+        self.qnodes_ = aligned(quantize(nodes, w, NORD)) if self.boxes == "quant" else None
         self.depth_, self.leaves_ = int(depth), int(nleaves)
         self.box_ = root_box(scene)
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
@@ -428,8 +458,14 @@ class WideBVH(TreeTraceMixin, Accel):
         """Up to W - 1 pushed children per level, and a margin."""
         return (self.width_ - 1) * (self.depth_ + 1) + 8
 
+    def _traced(self) -> np.ndarray:
+        """The node records the kernel walks."""
+        return self.nodes_ if self.qnodes_ is None else self.qnodes_
+
     def _tree_arrays(self) -> tuple:
-        return (self.width_, self.nodes_.reshape(-1), self.nodes_.view(np.float32).reshape(-1),
+        rec = self._traced()
+        return (self.width_, rec.reshape(-1), rec.view(np.float32).reshape(-1),
+                None if self.qnodes_ is None else rec.view(np.uint8).reshape(-1),
                 self.tri4_.reshape(-1), self.ids4_.reshape(-1))
 
     def stats(self) -> dict:
@@ -437,7 +473,7 @@ class WideBVH(TreeTraceMixin, Accel):
         w = self.width_
         child = self.nodes_[:, 6 * w:7 * w] if nn else np.zeros((0, w), np.int32)
         lo = self.nodes_.view(np.float32)[:, :w] if nn else np.zeros((0, w), np.float32)
-        mem = self.nodes_.nbytes + self.tri4_.nbytes + self.ids4_.nbytes
+        mem = self._traced().nbytes + self.tri4_.nbytes + self.ids4_.nbytes
         return {
             "structure": "wbvh", "width": w, "nodes": nn, "interior": nn, "leaves": self.leaves_,
             "blocks": len(self.tri4_) if self.n_ else 0, "depth": self.depth_, "refs": self.n_,
@@ -445,8 +481,9 @@ class WideBVH(TreeTraceMixin, Accel):
             "interior_children": int((child > 0).sum()),
             "mean_leaf_refs": self.n_ / max(self.leaves_, 1),
             "memory_bytes": int(mem),
-            "working_set": working_set(self.nodes_.nbytes, self.ids4_.nbytes, self.tri4_.nbytes),
+            "working_set": working_set(self._traced().nbytes, self.ids4_.nbytes, self.tri4_.nbytes),
+            "boxes": self.boxes,
             "build_s": self.build_seconds_,
             "params": {"width": self.width, "bins": self.bins, "max_leaf": self.max_leaf,
-                       "trav_cost": self.trav_cost},
+                       "trav_cost": self.trav_cost, "boxes": self.boxes},
         }
