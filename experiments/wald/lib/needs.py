@@ -1,4 +1,4 @@
-"""What a packet walks that none of its rays needs (issue 15: what limits coherent grid traversal at
+"""What a packet walks that none of its rays needs (what limits coherent grid traversal at
 low resolution).
 
 A ray *needs* the cells its own 3D-DDA walk visits up to its closest hit, and the triangles those
