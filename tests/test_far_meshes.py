@@ -51,6 +51,18 @@ def test_far_and_scaled_meshes_match_oracle_exactly(structure, mesh, placement, 
     assert res["hits"] > NRAYS // 10  # the rays really meet the mesh
 
 
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("placement", list(PLACEMENTS))
+def test_far_and_scaled_meshes_quantised_wide_bvh(placement, kind, far_scene, agrees_exactly):
+    """The wide BVH's byte-quantised boxes (node origin and step per axis) at every placement: far
+    from the origin a step is below float32's spacing, and the outward rounding must still hold."""
+    scene = far_scene("bunny-948", *PLACEMENTS[placement])
+    rays, (ref, ties) = _rays_and_oracle(scene, kind)
+    hits, _ = build(scene, "wbvh", boxes="quant").intersect(rays.origins, rays.directions, counters=False)
+    res = agrees_exactly(hits, ref, ties, ("wbvh-quant", scene.name, kind))
+    assert res["hits"] > NRAYS // 10
+
+
 @pytest.mark.parametrize("placement", ["far-1e5", "small-far-1e-3-at-1e3"])
 def test_far_mesh_rays_lie_in_vertex_planes(placement, far_scene):
     """The premise of the far-mesh cases: many adversarial rays lie exactly in a coordinate plane
