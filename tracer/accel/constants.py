@@ -46,7 +46,8 @@ WIDE_BLOCK = 4
 #: tracer.accel.wide_quant). The box test meets a superset of the float layout's children, so t and id
 #: are unchanged and only the visits and the time move. It does not pay here: the nodes are a quarter of
 #: the working set (the leaves' float32 blocks are the rest; bunny-69k 3.7 -> 3.2 MiB), visits rise 1-2 %,
-#: and the decode costs more than the halved node loads save. Paired quant/float time (1 thread, 100k
-#: rays, 9 rounds): bunny-69k 1.07 random / 1.13 camera, dragon-202k 1.07/1.09, dragon-871k 1.00/1.06,
-#: fandisk-x16 1.02/1.12. ``gridcost bench`` pairs ``wbvh-quant`` beside the default on every mesh.
+#: and the decode costs more than the halved node loads save. ``gridcost bench`` pairs ``wbvh-quant``
+#: beside the default on every mesh: on eight meshes (clean c8db68d, 1 thread, paired with Embree) quant
+#: is behind on camera rays everywhere (0.96-1.08x Embree against 1.02-1.26x) and on random rays on seven
+#: (0.79-0.92x against 0.84-1.00x); only dragon-871k's random rays gain (0.80x against 0.76x).
 WIDE_BOXES = "float"
