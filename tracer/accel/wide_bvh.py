@@ -23,8 +23,8 @@ Traversal: the rules of :mod:`tracer.accel.bvh4` (root box in float64, box tests
 ``tol``, popped entries beyond the closest hit + tol dropped, float32 vertices passed to the float64
 triangle test exactly as the oracle passes them, so t and id are bit-identical to the oracle's),
 except that the hit children are pushed in the node's order for the ray's octant, nearest on top,
-with no sort, and the entry to be popped next has its cache lines prefetched (``_prefetch_entry``). Counters: ``setups`` 1 per ray meeting the root box, ``nodes`` entries visited (wide
-nodes and leaves), ``steps`` leaves visited, ``tests`` triangles in the leaves visited (padding
+with no sort, and the entry to be popped next has its cache lines prefetched (``_prefetch_entry``).
+Counters: ``setups`` 1 per ray meeting the root box, ``nodes`` entries visited (wide nodes and leaves), ``steps`` leaves visited, ``tests`` triangles in the leaves visited (padding
 lanes not counted).
 """
 from __future__ import annotations
@@ -40,7 +40,7 @@ from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
 from tracer.accel.simd import ctz, popc, prefetch, slab4, slab8, slabq4, slabq8
-from tracer.accel.wide_quant import HEADER, ORDER_BYTES, quantize
+from tracer.accel.wide_quant import HEADER, ORDER_BYTES, child_word, order_byte, qnode_words, quantize
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.errors import GridcostError
 from tracer.measure.memory import check_budget, working_set
@@ -274,9 +274,9 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
         cw = np.uintp(6 * W)
         ow = np.uintp(7 * W)
     else:  # ... of the child words, and the byte offset of the orders
-        cw = np.uintp(HEADER + 6 * W // 4)
-        ow = np.uintp(4) * (cw + Wu)
-        words = cw + Wu + np.uintp((NORD * ORDER_BYTES + 3) // 4)
+        words = np.uintp(qnode_words(W, NORD))
+        cw = np.uintp(child_word(W))
+        ow = np.uintp(order_byte(W))
     for i in range(lo, hi):
         px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
         best_id = -1

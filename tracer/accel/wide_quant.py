@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tracer.accel._jit import jit
+
 #: plane bytes per axis step: q in 0..QMAX
 QMAX = 255
 #: header words (origin and step per axis) and bytes of one octant's order
@@ -26,16 +28,19 @@ HEADER = 6
 ORDER_BYTES = 3
 
 
+@jit(inline="always")
 def qnode_words(width: int, nord: int) -> int:
-    """int32 words of a quantised record."""
+    """int32 words of a quantised record (jitted: the kernel computes its offsets with these too)."""
     return HEADER + 6 * width // 4 + width + (nord * ORDER_BYTES + 3) // 4
 
 
+@jit(inline="always")
 def child_word(width: int) -> int:
     """Word offset of the child words in a quantised record."""
     return HEADER + 6 * width // 4
 
 
+@jit(inline="always")
 def order_byte(width: int) -> int:
     """Byte offset of the first octant's order in a quantised record."""
     return 4 * (child_word(width) + width)
