@@ -38,6 +38,7 @@ from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree import root_box
+from tracer.accel.pages import traversal_array, traversal_rows
 from tracer.measure.memory import check_budget, working_set
 
 NCOUNT = len(COUNTER_NAMES)
@@ -376,10 +377,10 @@ class BVH(TreeTraceMixin, Accel):
         nodes[:, 6:] = info
         if self.order == "distance":  # interior b = 0: the kernel orders children by entry distance
             nodes[nodes[:, 7] < 0, 7] = 0
-        self.nodes_ = nodes
-        self.nodes_f_ = nodes.view(np.float32)
+        self.nodes_ = traversal_array(nodes)
+        self.nodes_f_ = self.nodes_.view(np.float32)
         self.tri_ids_ = order
-        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9)[order])
+        self.tri_verts_ = traversal_rows(tris.reshape(-1, 9), order)
         self.build_seconds_ = time.perf_counter() - t_start
         self.box_ = root_box(scene)
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))

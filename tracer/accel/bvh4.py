@@ -39,6 +39,7 @@ from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import Accel, TreeTraceMixin
 from tracer.accel.bvh import BVH, BVH_TRAV_COST, ray_start
 from tracer.accel.geometry import INF, ray_triangle, t_tolerance
+from tracer.accel.pages import traversal_array
 from tracer.measure.memory import working_set
 from tracer.accel.simd import slab4
 
@@ -289,8 +290,8 @@ class BVH4(TreeTraceMixin, Accel):
             return self
         self.box_ = b.box_
         rec, depth = collapse4(b.nodes_f_[:, :6], b.nodes_[:, 6:8])
-        self.nodes_ = rec
-        self.nodes_f_ = rec.view(np.float32)
+        self.nodes_ = traversal_array(rec)
+        self.nodes_f_ = self.nodes_.view(np.float32)
         self.depth_ = int(depth)
         self.build_seconds_ = time.perf_counter() - t_start
         return self

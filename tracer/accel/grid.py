@@ -22,6 +22,7 @@ from tracer.accel import COUNTER_NAMES, Accel
 from tracer.accel.constants import PBRT_GRID_MAX_VOXELS, PBRT_GRID_VOXELS_PER_CUBE_ROOT, WALD_LAMBDA
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle, tri_box_overlap
+from tracer.accel.pages import traversal_empty, traversal_rows
 from tracer.accel.simd import ctz, popc
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import cache_bytes, check_budget, working_set
@@ -349,12 +350,13 @@ def macro_occupancy(cell_start, res, k: int) -> np.ndarray:
 
 
 @jit
-def soa_blocks(tv, tri_ids):
+def soa_blocks(tv, tri_ids, out):
     """The cell-order copy of the triangles (row r = triangle ``tri_ids[r]``) as flat float32 SoA
     blocks of four references (block b holds references 4b..4b+3, word 12 v + 4 a + lane: vertex v,
-    axis a), the last block padded with zeros (a degenerate triangle; its lanes are masked anyway)."""
+    axis a), written into ``out`` (``ceil(refs / 4) * TRI4_WORDS`` words), the last block padded with
+    zeros (a degenerate triangle; its lanes are masked anyway)."""
     refs = tri_ids.shape[0]
-    out = np.zeros(((refs + 3) // 4) * TRI4_WORDS, np.float32)
+    out[max(refs - 1, 0) // 4 * TRI4_WORDS:] = 0.0
     for r in range(refs):
         t = tri_ids[r]
         base = (r >> 2) * TRI4_WORDS + (r & 3)
@@ -377,21 +379,26 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
         raise GridcostError(f"{what}: over the int32 cell index range")
     check_budget(what, grid_build_bytes(ncell, scene.n, scene.n, "copy", macro))
     nx, ny, nz = (int(r) for r in res)
-    cell_start = np.zeros(ncell + 1, dtype=np.int32)  # counts, then starts, then ends (grid_assign)
+    # the arrays the kernels walk are made in place in traversal memory (tracer.accel.pages): no copy
+    cell_start = traversal_empty(ncell + 1, np.int32)  # counts, then starts, then ends (grid_assign)
+    cell_start[:] = 0
     refs = int(grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, np.zeros(0, np.int32), False))
     if refs >= 2**31:
         raise GridcostError(f"{what}: {refs:,} triangle references exceed the int32 index range")
     layout = choose_layout(layout, scene.n, refs)
     check_budget(f"{what} with {refs:,} triangle references", grid_build_bytes(ncell, refs, scene.n, layout, macro))
     starts_shifted(cell_start)
-    tri_ids = np.empty(refs, dtype=np.int32)
+    tri_ids = traversal_empty(refs, np.int32)
     grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, tri_ids, True)
     tv = scene.tris.reshape(-1, 9)
     if layout == "blocks":
-        tri_verts = soa_blocks(tv, tri_ids)
-    else:
-        tri_verts = np.ascontiguousarray(tv if layout == "index" else tv[tri_ids])
-    occ = np.zeros((ncell + 7) // 8, np.uint8)
+        tri_verts = soa_blocks(tv, tri_ids, traversal_empty(((refs + 3) // 4) * TRI4_WORDS, np.float32))
+    elif layout == "copy":
+        tri_verts = traversal_rows(tv, tri_ids)
+    else:  # "index": the scene's own rows
+        tri_verts = np.ascontiguousarray(tv)
+    occ = traversal_empty((ncell + 7) // 8, np.uint8)
+    occ[:] = 0
     occupancy_bits(cell_start, occ)
     return cell_start, tri_ids, tri_verts, occ, layout
 

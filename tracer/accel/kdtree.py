@@ -76,6 +76,7 @@ from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.accel.kdtree_clip import kd_build_clip
 from tracer.accel.simd import prefetch
+from tracer.accel.pages import traversal_array
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import check_budget, fmt_bytes, memory_budget, working_set
 
@@ -388,8 +389,6 @@ class KdTree(TreeTraceMixin, Accel):
         nodes = kd_compact(w0, w1, depth)
         if len(nodes) >= 2**27:
             raise GridcostError(f"a kd-tree of {len(nodes):,} nodes exceeds the 27-bit child index")
-        self.nodes_ = nodes
-        self.nodes_f_ = nodes.view(np.float32)
         self.logical_nodes_ = len(w0)
         # vertices not copied per reference (9 refs per triangle would not fit L2): in scene order,
         # or in leaf order with the map back to the scene's indices (-1 stays -1)
@@ -404,8 +403,11 @@ class KdTree(TreeTraceMixin, Accel):
             tris = tris[perm]
             self.tri_order_ = np.append(perm, -1).astype(np.int32)
         self.tri_ids_ = leaf_ids
-        self.tri_verts_ = np.ascontiguousarray(tris.reshape(-1, 9))
-        self.blocks_, self.block_ids_ = leaf_blocks(nodes, leaf_ids, self.tri_verts_)
+        self.tri_verts_ = traversal_array(tris.reshape(-1, 9))
+        blocks, block_ids = leaf_blocks(nodes, leaf_ids, self.tri_verts_)  # (writes the leaves' block words)
+        self.blocks_, self.block_ids_ = traversal_array(blocks), traversal_array(block_ids)
+        self.nodes_ = traversal_array(nodes)
+        self.nodes_f_ = self.nodes_.view(np.float32)
         self.box_ = root_box(scene) if n else np.zeros(6)
         self.build_seconds_ = time.perf_counter() - t_start
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))

@@ -39,6 +39,7 @@ from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
+from tracer.accel.pages import traversal_array
 from tracer.accel.simd import ctz, popc, prefetch, slab4, slab8, slabq4, slabq8
 from tracer.accel.wide_quant import HEADER, ORDER_BYTES, child_word, order_byte, qnode_words, quantize
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
@@ -59,19 +60,6 @@ def host_width() -> int:
 
 def node_words(width: int) -> int:
     return 7 * width + NORD
-
-
-#: byte alignment of the node and leaf arrays: a 256-byte node then spans 4 cache lines, not 5
-ALIGN = 64
-
-
-def aligned(a: np.ndarray) -> np.ndarray:
-    """A copy of ``a`` whose data starts on an ALIGN-byte boundary."""
-    buf = np.empty(a.nbytes + ALIGN, np.uint8)
-    off = (-buf.ctypes.data) % ALIGN
-    out = buf[off:off + a.nbytes].view(a.dtype).reshape(a.shape)
-    out[...] = a
-    return out
 
 
 # ---------------------------------------------------------------- build (collapse)
@@ -445,12 +433,13 @@ class WideBVH(TreeTraceMixin, Accel):
         nb, info, order, nleaves, _, _, _, _ = bvh_build(pb, pc, int(self.bins), int(self.max_leaf),
                                                          float(self.trav_cost), WIDE_BLOCK)
         tv = np.ascontiguousarray(tris.reshape(-1, 9)[order])
-        tri4, self.ids4_, leaf_word = leaf_blocks(info, tv, order)
-        self.tri4_ = aligned(tri4)
+        tri4, ids4, leaf_word = leaf_blocks(info, tv, order)
+        self.ids4_ = traversal_array(ids4)
+        self.tri4_ = traversal_array(tri4)
         nodes, depth = collapse(nb, info, w, leaf_word)
-        self.nodes_ = aligned(nodes)
+        self.nodes_ = traversal_array(nodes)
         # the layout traced: the float records, or the same tree quantised (one byte a plane)
-        self.qnodes_ = aligned(quantize(nodes, w, NORD)) if self.boxes == "quant" else None
+        self.qnodes_ = traversal_array(quantize(nodes, w, NORD)) if self.boxes == "quant" else None
         self.depth_, self.leaves_ = int(depth), int(nleaves)
         self.box_ = root_box(scene)
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))

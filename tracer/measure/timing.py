@@ -285,8 +285,11 @@ def measurement_key(code_paths: tuple[str, ...] = ()) -> dict:
 def host_info() -> dict:
     import numba
 
+    from tracer.accel.pages import thp_mode
     from tracer.measure.provenance import cpu_model, host
     return {"host": host(), "cpu": cpu_model(), "cores": os.cpu_count(), "machine": platform.machine(),
             "python": platform.python_version(), "numba_threads": numba.get_num_threads(),
             "clock": clock_name(), "thread_clock_check": thread_clock_check(),
+            # whether the structures' arrays (and Embree's) can be on huge pages (tracer.accel.pages)
+            "transparent_huge_pages": thp_mode(),
             "load_average": os.getloadavg() if hasattr(os, "getloadavg") else None}
