@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tracer import build, load_scene
-from tracer.accel.pages import ALIGN, HUGE_PAGE, thp_mode, traversal_array
+from tracer.accel.pages import ALIGN, HUGE_PAGE, thp_mode, traversal_array, traversal_concat, traversal_rows
 
 
 @pytest.mark.parametrize("shape,dtype", [((0, 9), np.float32), ((7,), np.uint8), ((1000, 9), np.float32),
@@ -26,6 +26,17 @@ def test_copy_keeps_values_layout_and_alignment(shape, dtype):
 def test_non_contiguous_input_is_copied_in_order():
     a = np.arange(60, dtype=np.int32).reshape(6, 10)[:, ::2]
     assert np.array_equal(traversal_array(a), a)
+
+
+def test_gathers_and_concatenations_equal_numpy_s():
+    rng = np.random.default_rng(7)
+    tv = rng.random((500, 9)).astype(np.float32)
+    rows = rng.integers(0, 500, 1200)
+    assert np.array_equal(traversal_rows(tv, rows), tv[rows])
+    parts = [rng.integers(0, 1 << 30, (k, 2)) for k in (3, 0, 700_000)]
+    out = traversal_concat(parts, np.int32)
+    assert out.dtype == np.int32 and np.array_equal(out, np.concatenate(parts).astype(np.int32))
+    assert out.ctypes.data % ALIGN == 0
 
 
 def test_thp_mode_is_a_policy_word():

@@ -76,7 +76,7 @@ from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
 from tracer.accel.kdtree_build import LEAF, kd_build, kd_compact, sorted_edges  # noqa: F401 - the SAH build
 from tracer.accel.kdtree_clip import kd_build_clip
 from tracer.accel.simd import prefetch
-from tracer.accel.pages import traversal_array
+from tracer.accel.pages import traversal_array, traversal_rows
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
 from tracer.measure.memory import check_budget, fmt_bytes, memory_budget, working_set
 
@@ -400,10 +400,10 @@ class KdTree(TreeTraceMixin, Accel):
             one = ((nodes[:, 0] & 3) == LEAF) & ((nodes[:, 0] >> 2) == 1)
             nodes[one, 1] = inv[nodes[one, 1]]
             leaf_ids = inv[leaf_ids]
-            tris = tris[perm]
             self.tri_order_ = np.append(perm, -1).astype(np.int32)
         self.tri_ids_ = leaf_ids
-        self.tri_verts_ = traversal_array(tris.reshape(-1, 9))
+        tv = tris.reshape(-1, 9)  # one copy into traversal memory, in leaf order when there is one
+        self.tri_verts_ = traversal_array(tv) if self.tri_order_ is None else traversal_rows(tv, perm)
         blocks, block_ids = leaf_blocks(nodes, leaf_ids, self.tri_verts_)  # (writes the leaves' block words)
         self.blocks_, self.block_ids_ = traversal_array(blocks), traversal_array(block_ids)
         self.nodes_ = traversal_array(nodes)

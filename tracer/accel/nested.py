@@ -35,7 +35,7 @@ from tracer.accel import COUNTER_NAMES, Accel, as_rays, tmax_array
 from tracer.accel.constants import IZE_M1_EXPONENT, IZE_M_FACTOR
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box, ray_triangle
-from tracer.accel.pages import traversal_array, traversal_rows
+from tracer.accel.pages import traversal_concat, traversal_rows
 from tracer.accel.grid import grid_assign, grid_params, res_from_cells, starts_shifted
 from tracer.measure.memory import check_budget, working_set
 
@@ -397,10 +397,10 @@ class NestedGrid(Accel):
             np.cumsum(clen, out=lst_start[1:])
             lst_ids = _gather_ranges(ids_l, cs[:-1][cidx], cs[1:][cidx])
             del cs, ids_l
-        self.grid_f_ = traversal_array(np.concatenate(gf_parts))
-        self.grid_i_ = traversal_array(np.concatenate(gi_parts))
-        self.cells_ = traversal_array(np.concatenate(cell_parts))
-        self.tri_ids_ = traversal_array(np.concatenate(id_parts).astype(np.int32))
+        self.grid_f_ = traversal_concat(gf_parts, gf_parts[0].dtype)
+        self.grid_i_ = traversal_concat(gi_parts, gi_parts[0].dtype)
+        self.cells_ = traversal_concat(cell_parts, cell_parts[0].dtype)
+        self.tri_ids_ = traversal_concat(id_parts, np.int32)
         self.tri_verts_ = traversal_rows(tris.reshape(-1, 9), self.tri_ids_)
         self.build_seconds_ = time.perf_counter() - t_start
         self.m1_cells_, self.res1_, self.n_, self.levels_ = m1, res1, n, levels

@@ -91,6 +91,14 @@ def traversal_rows(a: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return np.take(a, rows, axis=0, out=out, mode="clip")
 
 
+def traversal_concat(parts, dtype) -> np.ndarray:
+    """``np.concatenate(parts).astype(dtype)`` written straight into :func:`traversal_empty` memory
+    (one pass, no intermediate; the cast is the unchecked one ``astype`` makes)."""
+    rows = sum(len(p) for p in parts)
+    out = traversal_empty((rows, *np.shape(parts[0])[1:]), dtype)
+    return np.concatenate(parts, out=out, casting="unsafe")
+
+
 def thp_mode() -> str:
     """This host's transparent-huge-page policy (``always``, ``madvise``, ``never``), or
     ``unavailable`` where the kernel does not say."""
