@@ -226,19 +226,14 @@ def agrees_exactly():
 
 
 def transformed_scene(scene, scale: float = 1.0, shift: float = 0.0):
-    """``scene`` normalised to unit size (largest extent 1, minimum corner at the origin), then
-    scaled by ``scale`` and translated by ``shift`` on every axis, in float64, rounded once to
-    float32: e.g. (1, 1e5) is a unit mesh 1e5 from the origin, where float32 coordinates are
-    1/128 apart and float32 rays often lie exactly in the planes of the mesh's vertices."""
-    import numpy as np
-
+    """``scene`` through :func:`tracer.scenes.derived.placed`: normalised to unit size, scaled by
+    ``scale`` and moved by ``shift`` on every axis: e.g. (1, 1e5) is a unit mesh 1e5 from the origin,
+    where float32 coordinates are 1/128 apart and float32 rays often lie exactly in the planes of the
+    mesh's vertices."""
+    from tracer.scenes.derived import placed
     from tracer.scenes.scene import Scene
 
-    v = scene.tris.astype(np.float64)
-    lo = v.reshape(-1, 3).min(axis=0)
-    ext = float((v.reshape(-1, 3).max(axis=0) - lo).max()) or 1.0
-    tris = ((v - lo) / ext * scale + shift).astype(np.float32)
-    return Scene(tris, f"{scene.name}@x{scale:g}+{shift:g}")
+    return Scene(placed(scene.tris, scale, shift), f"{scene.name}@x{scale:g}+{shift:g}")
 
 
 _FAR: dict = {}

@@ -57,3 +57,27 @@ def test_array_by_name_and_bad_names(load):
         load_scene("array-0-100-suzanne")
     with pytest.raises(GridcostError, match="unknown scene"):
         load_scene("array-4-10-no-such-mesh")
+
+
+@pytest.mark.parametrize("name, lo, ext", [("suzanne-far1e5", 1e5, 1.0), ("suzanne-size1e-4", 0.0, 1e-4),
+                                           ("suzanne-size25e3", 0.0, 2.5e4)])
+def test_placed_scenes_far_and_at_extreme_scales(load, name, lo, ext):
+    s = load_scene(name)
+    base = load("suzanne")
+    v = s.tris.reshape(-1, 3).astype(np.float64)
+    assert s.n == base.n and s.name == name and s.report["base"] == "suzanne"
+    np.testing.assert_allclose(v.min(0), lo, rtol=1e-6, atol=ext * 1e-6)
+    assert np.isclose((v.max(0) - v.min(0)).max(), ext, rtol=1e-3)
+    # the same shape: the base mesh normalised the same way, to float32 rounding at that place
+    b = base.tris.reshape(-1, 3).astype(np.float64)
+    unit = (b - b.min(0)) / (b.max(0) - b.min(0)).max()
+    np.testing.assert_allclose((v - lo) / ext, unit, atol=1e-7 * max(1.0, lo / ext) * 4)
+
+
+def test_placed_scenes_bad_names(load):
+    with pytest.raises(GridcostError, match="positive"):
+        load_scene("suzanne-size0")
+    with pytest.raises(GridcostError, match="float32"):
+        load_scene("suzanne-far1e39")
+    with pytest.raises(GridcostError, match="unknown scene"):
+        load_scene("no-such-mesh-far1e5")

@@ -12,6 +12,11 @@
                                 space separates the copies, so N (k copies) and Havran's sigma (the
                                 spread of references per grid cell, which grows with the empty space)
                                 can be matched to a scene of another paper (``array-24-60-bunny-69k``)
+``<scene>-far<d>``              ``<scene>`` at unit size (largest extent 1, minimum corner at the
+                                origin) moved by ``d`` on every axis (``dragon-11k-far1e5``: float32
+                                coordinates 1/128 apart there, rays often lie in the vertices' planes)
+``<scene>-size<s>``             ``<scene>`` at largest extent ``s`` with its minimum corner at the
+                                origin (``dragon-11k-size1e-4``, ``dragon-11k-size1e4``: extreme scales)
 ==============================  ==============================================================
 
 ``<scene>`` is any scene name :func:`tracer.scenes.scene.load_scene` knows (itself possibly derived). The
@@ -32,12 +37,13 @@ from tracer.scenes.scenetype import Scene
 SUBDIVIDED = re.compile(r"^(?P<base>.+?)-x(?P<k>4|16)$")
 STADIUM = re.compile(r"^(?P<base>.+)-in-stadium$")
 ARRAY = re.compile(r"^array-(?P<k>\d+)-(?P<gap>\d+)-(?P<base>.+)$")
+PLACED = re.compile(r"^(?P<base>.+)-(?P<op>far|size)(?P<v>\d+(?:e[+-]?\d+)?)$")
 #: scenes this module builds for itself elsewhere (procedural's own teapot-in-stadium)
 NOT_DERIVED = ("teapot-in-stadium",)
 
 
 def matches(spec: str) -> bool:
-    return spec not in NOT_DERIVED and any(p.match(spec) for p in (ARRAY, STADIUM, SUBDIVIDED))
+    return spec not in NOT_DERIVED and any(p.match(spec) for p in (ARRAY, STADIUM, SUBDIVIDED, PLACED))
 
 
 def subdivide(tris: np.ndarray, times: int = 1) -> np.ndarray:
@@ -79,6 +85,18 @@ def array(tris: np.ndarray, k: int, gap: float, seed: int = 7) -> np.ndarray:
     return np.concatenate(out).astype(np.float32)
 
 
+def placed(tris: np.ndarray, scale: float = 1.0, shift: float = 0.0) -> np.ndarray:
+    """``tris`` normalised to unit size (largest extent 1, minimum corner at the origin), scaled by
+    ``scale`` and moved by ``shift`` on every axis, in float64, rounded once to float32."""
+    v = np.asarray(tris, np.float64)
+    lo = v.reshape(-1, 3).min(axis=0)
+    ext = float((v.reshape(-1, 3).max(axis=0) - lo).max()) or 1.0
+    out = ((v - lo) / ext * scale + shift).astype(np.float32)
+    if not np.isfinite(out).all():
+        raise GridcostError(f"scale {scale:g} and shift {shift:g} take the mesh beyond float32")
+    return out
+
+
 def make(spec: str, load: Callable[[str], Scene]) -> Scene:
     """The derived scene ``spec``; ``load(name)`` loads its base scene."""
     from tracer.scenes.procedural import in_stadium
@@ -92,9 +110,18 @@ def make(spec: str, load: Callable[[str], Scene]) -> Scene:
         base = load(m["base"])
         tris, n_pot, view = in_stadium(base.tris)
         return Scene(tris, spec, "derived", report={"base": base.name, "teapot_triangles": n_pot}, view=view)
+    m = PLACED.match(spec)
+    if m:
+        base = load(m["base"])
+        v = float(m["v"])
+        scale, shift = (1.0, v) if m["op"] == "far" else (v, 0.0)
+        if not (scale > 0.0 and math.isfinite(scale) and math.isfinite(shift)):
+            raise GridcostError(f"{spec!r}: the size must be a positive number")
+        return Scene(placed(base.tris, scale, shift), spec, "derived",
+                     report={"base": base.name, "scale": scale, "shift": shift})
     m = SUBDIVIDED.match(spec)
     if m:
         base = load(m["base"])
         return Scene(subdivide(base.tris, {"4": 1, "16": 2}[m["k"]]), spec, "derived", report={"base": base.name})
     raise GridcostError(f"{spec!r} is not a derived scene name (<scene>-x4, <scene>-x16, <scene>-in-stadium, "
-                        f"array-<k>-<gap>-<scene>)")
+                        f"array-<k>-<gap>-<scene>, <scene>-far<d>, <scene>-size<s>)")

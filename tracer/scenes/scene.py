@@ -17,7 +17,9 @@ a ``MANIFEST.tsv`` name    a mesh listed in the models directory's       :mod:`t
                            ``tree``)
 ``fandisk-x4``,            derived from another scene by name:           :mod:`tracer.scenes.derived`
 ``teapot-x4-in-stadium``,  subdivided, in a stadium, k copies in a
-``array-24-60-bunny-69k``  lattice
+``array-24-60-bunny-69k``, lattice, far from the origin, at an extreme
+``dragon-11k-far1e5``,     scale
+``dragon-11k-size1e-4``
 ``path/to/mesh.ply``       any mesh file (OBJ, PLY, OFF, STL, GLB/GLTF,  :mod:`tracer.scenes.meshfile`
                            optionally .gz/.xz)
 =========================  ===========================================  ==========================
