@@ -45,6 +45,27 @@ def test_verify_text_output(run_cli):
     assert "cylinder-196" in proc.stdout and "0 disagreements" in proc.stdout
 
 
+def test_verify_suite_checks_every_variant(tmp_path):
+    """``verify --suite``: every bench variant but the measured one, on the scenes given (one far from the
+    origin here), a JSON and a summary each, and an index naming them all with their totals."""
+    from experiments.run import main
+    from experiments.tools.lib.variants import VARIANTS
+    from experiments.tools.verify import NOT_IN_SUITE
+    assert main(["verify", "--suite", "--scene", "cornell,bunny-948-far1e5", "--rays", "300",
+                 "--out", str(tmp_path)]) == 0
+    d = tmp_path / "verify"
+    names = [n for n in VARIANTS if n not in NOT_IN_SUITE]
+    assert "wbvh" in names and "kdtree-fast" in names and "bvh4-sah-fit" not in names
+    index = (d / "summary.md").read_text()
+    for name in names:
+        out = json.loads((d / f"{name}.json").read_text())
+        assert out["variant"] == name and (out["structure"], out["params"]) == VARIANTS[name]
+        assert [o["scene"] for o in out["scenes"]] == ["cornell", "bunny-948-far1e5"]
+        assert out["disagreements"] == 0 and out["rays"] > 4 * 300
+        assert (d / f"summary-{name}.md").exists() and f"[{name}](summary-{name}.md)" in index
+    assert "Not run: bvh4-sah-fit" in index
+
+
 def test_bench_json(run_cli, tmp_path):
     out_dir = tmp_path / "results"
     out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",
@@ -123,6 +144,7 @@ BAD_ARGS = [
     (["verify", "--scene", "bunny-948", "--rays", "10", "--structure", "octree"], "unknown structure 'octree'"),
     (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells"], "key=value"),
     (["verify", "--scene", "bunny-948", "--rays", "10", "--param", "cells=0"], "cell"),
+    (["verify", "--rays", "10"], "needs --scene or --mesh"),
 ]
 
 
