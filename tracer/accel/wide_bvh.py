@@ -350,16 +350,20 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
                                     | (np.int32(nq[ob + two]) << 16)
                             top = sp + nh - 1
                             j = top
+                            # every child in order is written at j, which moves down only past a met
+                            # one: a child not met is overwritten by the next met one, and the loop ends
+                            # after the farthest met child. No branch on each child's hit bit, which
+                            # random rays mispredict (paired, 1 thread, t and id identical: random rays
+                            # 0.93-0.96x the time on 7 meshes, camera 0.94-0.98x)
                             while True:
                                 k = perm & 7
                                 perm >>= 3
-                                if (mask >> k) & 1:
-                                    ju = np.uintp(j)
-                                    sc[ju] = ni[base + cw + np.uintp(k)]
-                                    st[ju] = np.float64(tb[k])
-                                    j -= 1
-                                    if j < sp:
-                                        break
+                                ju = np.uintp(j)
+                                sc[ju] = ni[base + cw + np.uintp(k)]
+                                st[ju] = np.float64(tb[k])
+                                j -= (mask >> k) & 1
+                                if j < sp:
+                                    break
                             c = sc[np.uintp(top)]
                             sp = top
                             # the second nearest is visited after c's subtree
