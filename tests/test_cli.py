@@ -66,6 +66,13 @@ def test_verify_suite_checks_every_variant(tmp_path):
     assert "Not run: bvh4-sah-fit" in index
 
 
+def test_verify_suite_json_is_one_object(run_cli, tmp_path):
+    out = _json(run_cli("verify", "--suite", "--scene", "cornell", "--rays", "100", "--kind", "random", "--json",
+                        "--out", str(tmp_path)))
+    assert out["scenes"] == ["cornell"] and out["disagreements"] == 0 and "wbvh" in out["variants"]
+    assert all(v["rays"] == 100 for v in out["variants"].values())
+
+
 def test_bench_json(run_cli, tmp_path):
     out_dir = tmp_path / "results"
     out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",

@@ -88,26 +88,32 @@ def _suite(args, kinds) -> int:
     from experiments.core.store import atomic_write
     from experiments.tools.lib.variants import VARIANTS
     scenes = args.scene.split(",") if args.scene else list(SUITE_SCENES)
-    rc, rows = 0, []
+    rc, rows, totals = 0, [], {}
     for name, (structure, params) in VARIANTS.items():
         if name in NOT_IN_SUITE:
             continue
-        code, total = _many(args, kinds, structure, params, name, scenes)
+        code, total = _many(args, kinds, structure, params, name, scenes, emit=False)
         rc = max(rc, code)
+        totals[name] = {k: total[k] for k in ("rays", "disagreements", "ties", "git_commit")}
+        host = total["host"]
         rows.append(f"| [{name}](summary-{name}.md) | {structure} {params or ''} | {total['rays']:,} | "
-                    f"{total['disagreements']} | {total['ties']} |")
+                    f"{total['disagreements']} | {total['ties']} | `{total['git_commit']}`, {host.get('host')} "
+                    f"({host.get('cpu')}), {total['finished']} |")
     lines = ["# Oracle agreement of every variant", "",
              f"`gridcost verify --suite`: each variant of `bench` traced on {len(scenes)} scenes "
              f"({', '.join(scenes)}), {args.rays:,} rays per kind ({', '.join(kinds)}; seed {args.seed}) and "
              "scene, against the float64 brute-force oracle (hit/miss, triangle id, t within 1e-5 relative; a "
              "different triangle at the same t is a tie, counted apart).", "",
-             "| variant | structure, parameters | rays | disagreements | ties |", "|---|---|---|---|---|", *rows, ""]
+             "| variant | structure, parameters | rays | disagreements | ties | commit, host, finished |",
+             "|---|---|---|---|---|---|", *rows, ""]
     lines += [f"Not run: {name} ({why})." for name, why in NOT_IN_SUITE.items()]
     atomic_write(Path(args.out) / "verify" / "summary.md", "\n".join(lines) + "\n")
+    if args.json:  # one object for the whole suite
+        emit_json({"scenes": scenes, "variants": totals, "disagreements": sum(t["disagreements"] for t in totals.values())})
     return rc
 
 
-def _many(args, kinds, structure: str, params: dict, tag: str, scenes) -> tuple[int, dict]:
+def _many(args, kinds, structure: str, params: dict, tag: str, scenes, emit: bool = True) -> tuple[int, dict]:
     """``structure`` with ``params`` on every scene: ``verify/<tag>.json`` and ``summary-<tag>.md``."""
     from pathlib import Path
 
@@ -140,7 +146,8 @@ def _many(args, kinds, structure: str, params: dict, tag: str, scenes) -> tuple[
               "(a different triangle at the same t: duplicate faces, shared edges)."]
     atomic_write(d / f"summary-{tag}.md", "\n".join(lines) + "\n")
     if args.json:
-        emit_json(total)
+        if emit:
+            emit_json(total)
     else:
         print(f"total: {total['rays']:,} rays, {total['disagreements']} disagreements, {total['ties']} ties")
     return (0 if total["disagreements"] == 0 else 1), total
