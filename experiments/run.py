@@ -165,8 +165,13 @@ def _run_target(name: str, ctx, args) -> int:
     """One target with a fresh ledger; its summary marks stand-ins; the results index is rewritten."""
     from experiments.core.store import OutputGuard, write_index
     ctx.start_target()
-    with OutputGuard(ctx.out / name, ctx.fig_dir, name):  # a failed run leaves the folder as it was
-        rc = importlib.import_module(TARGETS[name][0]).main(ctx, args)
+    with OutputGuard(ctx.out / name, ctx.fig_dir, name) as guard:  # a failed run leaves the folder as it was
+        module = importlib.import_module(TARGETS[name][0])
+        rc = module.main(ctx, args)
+        # a whole-folder target's files that this run did not write are an earlier run's; the per-scene
+        # targets (KEEPS_EARLIER_FILES) add to their folder, one scene or variant a run
+        if rc == 0 and not getattr(module, "KEEPS_EARLIER_FILES", False):
+            guard.drop_stale()
     ctx.mark_stand_ins(ctx.out / name / "summary.md")
     ctx.mark_hosts(ctx.out / name / "summary.md")
     ctx.mark_noise(ctx.out / name)

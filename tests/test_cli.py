@@ -215,3 +215,20 @@ def test_trimesh_reference_rays_fit_the_memory_budget(monkeypatch):
     assert bench.trimesh_ray_count(2000, 871_414) == 12 * 2**30 // (16 * 871_414) == 924
     monkeypatch.setenv("GRIDCOST_MEMORY_BUDGET", "1G")
     assert bench.trimesh_ray_count(2000, 871_414) < bench.TRIMESH_MIN_RAYS
+
+
+def test_a_whole_folder_target_drops_an_earlier_runs_files(tmp_path):
+    """derive rewrites its folder: a file an earlier run left (say by an optional flag) is removed after
+    a successful run, its own outputs stay; a per-scene target (verify) keeps earlier scenes' files."""
+    from experiments.run import main
+    from tracer.storage import atomic_write
+    out = tmp_path / "results"
+    stale = atomic_write(out / "derive" / "from-an-earlier-run.csv", "x\n")
+    fig = atomic_write(out / "paper_figs" / "derive.png", b"old")  # a figure derive does not draw
+    assert main(["derive", "--out", str(out)]) == 0
+    assert not stale.exists() and (out / "derive" / "summary.md").is_file()
+    assert (out / "derive" / "derive.json").is_file()
+    assert not fig.exists()
+    kept = atomic_write(out / "verify" / "other-scene.json", "{}\n")
+    assert main(["verify", "--scene", "cornell,bunny-948", "--rays", "50", "--kind", "random", "--out", str(out)]) == 0
+    assert kept.exists() and (out / "verify" / "grid.json").is_file()

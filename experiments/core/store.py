@@ -295,7 +295,9 @@ class OutputGuard:
     On entry every file of ``folder`` and every ``fig_dir/<name>.*`` is hard-linked into a hidden
     folder beside it (no bytes copied, so it works on a full disk; atomic writes give the new files
     new inodes, so the links keep the old contents). On an exception the run's files are removed and
-    the old ones put back; on success the links are dropped."""
+    the old ones put back; on success the links are dropped. :meth:`drop_stale` removes, after a
+    successful run, the files the run did not rewrite (still the snapshot's inode): an earlier run's
+    outputs (an optional flag's, a renamed file's) are not kept beside this run's as if it made them."""
 
     def __init__(self, folder: Path, fig_dir: Path | None = None, name: str = ""):
         self.folder, self.fig_dir, self.name = Path(folder), fig_dir, name or Path(folder).name
@@ -320,6 +322,19 @@ class OutputGuard:
             shutil.rmtree(self.keep, ignore_errors=True)
             self.had_folder, self.old_figs, self.keep = None, {}, None
         return self
+
+    def drop_stale(self) -> list[Path]:
+        """Remove the folder's files and the ``<name>.*`` figures this run did not rewrite (every
+        output is written atomically, so a rewritten file is a new inode); returns them."""
+        if self.keep is None or not self.had_folder and not self.old_figs:
+            return []
+        pairs = [(f, self.folder / f.relative_to(self.keep / "folder"))
+                 for f in (self.keep / "folder").rglob("*") if f.is_file()] if self.had_folder else []
+        pairs += [(self.keep / "figs" / nm, f) for nm, f in self.old_figs.items()]
+        gone = [p for old, p in pairs if p.is_file() and os.path.samefile(old, p)]
+        for p in gone:
+            p.unlink()
+        return gone
 
     def __exit__(self, exc_type, exc, tb):
         import shutil

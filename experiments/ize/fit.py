@@ -26,6 +26,10 @@ from experiments.core.sweep import (FULL_FACTORS, QUICK_FACTORS, fastest, grid_c
 from tracer.scenes.rays import make_rays
 from tracer.measure.timing import set_threads
 
+#: the folder gathers one scene's files a run: the runner keeps the earlier runs'
+#: files (experiments.run drops a whole-folder target's stale ones)
+KEEPS_EARLIER_FILES = True
+
 
 def add_arguments(p) -> None:
     add_scene_args(p)

@@ -39,6 +39,11 @@ from experiments.core.store import atomic_write
 from experiments.tools.lib.advising import CHECK_RAYS, calibration, measure, predict, with_totals
 from tracer.errors import GridcostError
 
+#: the folder gathers one scene and ray kind a run: the runner keeps the earlier runs'
+#: files (experiments.run drops a whole-folder target's stale ones)
+KEEPS_EARLIER_FILES = True
+
+
 def add_arguments(p) -> None:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--mesh", help="path of your mesh (OBJ, PLY, OFF, STL, GLB)")

@@ -24,6 +24,9 @@ from tracer.measure.memory import memory_budget
 from tracer.scenes.rays import make_rays
 from tracer.measure.timing import build_clock, host_info, set_threads, time_call
 
+#: the folder gathers one JSON per scene and thread count a run: the runner keeps the earlier runs'
+#: files (experiments.run drops a whole-folder target's stale ones)
+KEEPS_EARLIER_FILES = True
 
 
 def default_names() -> list[str]:

@@ -14,6 +14,10 @@ from tracer.errors import GridcostError
 from tracer.accel.oracle import compare, oracle_cached
 from tracer.scenes.rays import KINDS, make_rays
 
+#: the folder gathers one JSON and summary per variant a run: the runner keeps the earlier runs' files
+#: (experiments.run drops a whole-folder target's stale ones)
+KEEPS_EARLIER_FILES = True
+
 #: the scenes ``--suite`` checks every variant on: scanned meshes, a CAD part, procedural edge cases
 #: (a closed box, thin cylinders with and without caps, scattered particles) and one mesh far from the
 #: origin and at two extreme scales (:mod:`tracer.scenes.derived`)

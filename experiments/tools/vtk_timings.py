@@ -35,6 +35,10 @@ from tracer.accel.reference import VtkGridLocator
 from tracer.errors import GridcostError
 from tracer.scenes.rays import make_rays
 
+#: the folder gathers one scene's timings (and its --check) a run: the runner keeps the earlier runs'
+#: files (experiments.run drops a whole-folder target's stale ones)
+KEEPS_EARLIER_FILES = True
+
 #: the resolutions of the "user's" CSV: few, spread over two and a half decades of cells (x N)
 FIT_FACTORS = "0.02,0.1,0.5,2,8"
 #: the dense sweep ``--check`` finds VTK's own best in (x N)
