@@ -353,8 +353,8 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
                             # every child in order is written at j, which moves down only past a met
                             # one: a child not met is overwritten by the next met one, and the loop ends
                             # after the farthest met child. No branch on each child's hit bit, which
-                            # random rays mispredict (paired, 1 thread, t and id identical: random rays
-                            # 0.93-0.96x the time on 7 meshes, camera 0.94-0.98x)
+                            # random rays mispredict (paired new/old, 1 thread, 15 rounds, t and id
+                            # identical: random rays 0.93-0.96x the time on 5 meshes, camera 0.97-1.01x)
                             while True:
                                 k = perm & 7
                                 perm >>= 3
