@@ -39,8 +39,10 @@ By default (``leaf_order=True``; False keeps scene order) the triangles are stor
 then returns stored indices and ``_trace`` maps them back to the scene's through ``tri_order_``
 (8-16 % less time per random ray on bunny-69k / dragon-202k, paired, one thread).
 
-Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack (one
-per block of BLOCK rays); a popped node whose t-range starts after the closest hit is skipped
+Traversal: pbrt-v2 ``KdTreeAccel::Intersect`` — front-to-back with a fixed-size todo stack. Each
+block of BLOCK rays is traced two rays at a time, one node of each in turn (:func:`kd_chunk`), so
+the two node-to-node dependency chains overlap; each ray's visits, counters and result are those
+of tracing it alone. A popped node whose t-range starts after the closest hit is skipped
 (pbrt stops there, but the stack is not ordered by entry t: a ray lying in a split plane pushes
 the above child with the parent's whole t-range, beneath entries of the below subtree that start
 later — stopping lost nearer hits there, e.g. on meshes far from the origin, where float32 rays
@@ -67,7 +69,7 @@ import time
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, ray_jit, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.accel.constants import (PBRT_KD_DEPTH_A, PBRT_KD_DEPTH_B, PBRT_KD_EMPTY_BONUS,
                               PBRT_KD_ISECT_COST, PBRT_KD_MAX_PRIMS, PBRT_KD_TRAVERSAL_COST)
@@ -104,39 +106,22 @@ def _slab_clip(lo, hi, o, inv, t0, t1):
     return t0, t1
 
 
-@jit
-def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, stack_size,
-             out_t, out_id, counters):
-    """Trace rays lo..hi-1 (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when ``anyhit``) with one
-    todo stack. ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array; ``tv`` the
-    triangles (one-triangle leaves); ``blk``/``bids`` the blocks of four of the larger leaves (flat
-    float32, :data:`tracer.accel.simd_tri.TRI4_WORDS` a block) and their triangle indices (flat, four
-    a block, -1 padding)."""
-    rs = np.empty(9, np.float64)  # origin, direction, inverse direction, indexed by axis
-    t4 = np.empty(4, np.float64)  # the lanes' t of a block test
-    sn = np.empty(stack_size, np.int32)
-    s0 = np.empty(stack_size, np.float64)
-    s1 = np.empty(stack_size, np.float64)
-    bx0 = box[0]
-    by0 = box[1]
-    bz0 = box[2]
-    bx1 = box[3]
-    by1 = box[4]
-    bz1 = box[5]
-    one = np.uintp(1)
-    for i in range(lo, hi):
+@ray_jit
+def _kd_next(nxt, hi, O, D, tmin, tmax, box, diag, rs, out_t, out_id, counters):
+    """Load the next ray from ``nxt`` on that meets the root box into ``rs`` (origin, direction,
+    inverse direction, indexed by axis); the rays before it that miss the box get their result
+    here. Returns (its index, or -1 when none is left; the next ``nxt``; best; the widened t-range
+    ntmin, ntmax; 2 tol). The root slab test ignores NaN products (origin on a slab plane, zero
+    direction)."""
+    while nxt < hi:
+        i = nxt
+        nxt += 1
         ox, oy, oz, dx, dy, dz, ix, iy, iz = load_ray(O, D, i)
         best = np.float64(tmax[i])
-        best_id = -1
-        nvis = 0
-        leaves = 0
-        tests = 0
-        # root slab test; NaN products (origin on a slab plane, zero direction) are ignored
-        t0, t1 = _slab_clip(bx0, bx1, ox, ix, tmin, best)
-        t0, t1 = _slab_clip(by0, by1, oy, iy, t0, t1)
-        t0, t1 = _slab_clip(bz0, bz1, oz, iz, t0, t1)
-        in_box = t0 <= t1
-        if in_box:
+        t0, t1 = _slab_clip(box[0], box[3], ox, ix, tmin, best)
+        t0, t1 = _slab_clip(box[1], box[4], oy, iy, t0, t1)
+        t0, t1 = _slab_clip(box[2], box[5], oz, iz, t0, t1)
+        if t0 <= t1:
             tol = t_tolerance(t0, t1, diag, ix, iy, iz)
             rs[0] = ox
             rs[1] = oy
@@ -147,114 +132,172 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, bl
             rs[6] = ix
             rs[7] = iy
             rs[8] = iz
-            sp = 0
-            node = 0
-            # the node's t-range kept widened by tol on both sides (ntmin - tol, ntmax + tol), so a
-            # plane distance is compared as computed, with no add on the node-to-node chain
-            tol2 = tol + tol
-            ntmin = t0 - tol
-            ntmax = t1 + tol
-            while True:
-                # descend from ``node`` to a leaf, front to back
-                while node >= 0:
-                    nvis += 1
-                    nu = np.uintp(2 * node)
-                    w = nodes[nu]
-                    axis = w & 3
-                    if axis == LEAF:
-                        break
-                    # the above child is far away in memory: start loading it now (w >> 4 is 0
-                    # when a child is an empty leaf, a harmless hint)
-                    prefetch(nodes, np.uintp(2 * (w >> 4)))
-                    split = np.float64(nodes_f[nu + one])
-                    fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
-                    below = -1 if fl == 1 else node + 1
-                    above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
-                    au = np.uintp(axis)
-                    o = rs[au]
-                    d = rs[au + np.uintp(3)]
-                    inv = rs[au + np.uintp(6)]
-                    if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
-                        if o < split:
-                            node = below
-                        elif o > split:
-                            node = above
-                        else:
-                            spu = np.uintp(sp)
-                            sn[spu] = above
-                            s0[spu] = ntmin
-                            s1[spu] = ntmax
-                            sp += 1
-                            node = below
-                        continue
-                    tp = (split - o) * inv
-                    neg = d < 0.0
-                    first = above if neg else below
-                    second = below if neg else above
-                    lo_tp = tp - tol2  # the children's widened ranges end tol beyond the plane
-                    hi_tp = tp + tol2
-                    only_first = tp > ntmax
-                    only_second = tp < ntmin
-                    both = not (only_first or only_second)
-                    # branch-free: always write the todo entry, keep it only when both (and,
-                    # without counters, only when it is not an empty leaf: visiting one only counts)
-                    spu = np.uintp(sp)
-                    sn[spu] = second
-                    s0[spu] = max(ntmin, lo_tp)
-                    s1[spu] = ntmax
-                    keep = both and (counters is not None or second >= 0)
-                    sp += 1 if keep else 0
-                    node = second if only_second else first
-                    ntmax = min(ntmax, hi_tp) if both else ntmax
-                if node < 0:
-                    nvis += 1
-                    leaves += 1  # an empty leaf: visited as pbrt does, but not stored
+            # the node's t-range is kept widened by tol on both sides (ntmin - tol, ntmax + tol),
+            # so a plane distance is compared as computed, with no add on the node-to-node chain
+            return i, nxt, best, t0 - tol, t1 + tol, tol + tol
+        store_ray(out_t, out_id, counters, i, INF, -1, 0, 0, 0, 0, 0)
+    return -1, nxt, 0.0, 0.0, 0.0, 0.0
+
+
+@ray_jit
+def _kd_visit(node, ntmin, ntmax, tol2, sp, best, best_id, nvis, leaves, tests, rs, sn, s0, s1,
+              nodes, nodes_f, tv, blk, bids, t4, tmin, anyhit, counters):
+    """One node of one ray's traversal (pbrt-v2 KdTreeAccel::Intersect, or IntersectP when
+    ``anyhit``): an interior node descends one level, front to back; a leaf (``node`` < 0: an empty
+    one) is tested, then the next pending node is popped. Returns the ray's new state (node, ntmin,
+    ntmax, sp, best, best_id, nvis, leaves, tests, done)."""
+    one = np.uintp(1)
+    nvis += 1
+    if node >= 0:
+        nu = np.uintp(2 * node)
+        w = nodes[nu]
+        axis = w & 3
+        if axis != LEAF:
+            # the above child is far away in memory: start loading it now (w >> 4 is 0 when a
+            # child is an empty leaf, a harmless hint)
+            prefetch(nodes, np.uintp(2 * (w >> 4)))
+            split = np.float64(nodes_f[nu + one])
+            fl = (w >> 2) & 3  # 1: below child empty, 2: above child empty
+            below = -1 if fl == 1 else node + 1
+            above = node + 1 if fl == 1 else (-1 if fl == 2 else w >> 4)
+            au = np.uintp(axis)
+            o = rs[au]
+            d = rs[au + np.uintp(3)]
+            inv = rs[au + np.uintp(6)]
+            if d == 0.0:  # parallel to the plane: the origin's side (both when on it)
+                if o < split:
+                    node = below
+                elif o > split:
+                    node = above
                 else:
-                    leaves += 1
-                    cnt = w >> 2
-                    x = nodes[nu + one]
-                    if cnt == 1:  # single-triangle leaf: the triangle's index inline
-                        r = np.uintp(x)
-                        tests += 1
-                        t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2],
-                                         tv[r, 3], tv[r, 4], tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8],
-                                         tmin, best)
-                        if t < best:
-                            best = t
-                            best_id = x
-                            if anyhit:
-                                break
-                    else:  # blocks of four from block x on, four triangles tested in vector lanes
-                        tests += cnt
-                        done = False
-                        for bk in range(x, x + ((cnt + 3) >> 2)):
-                            hit = ray_tri4(blk, np.uintp(bk * TRI4_WORDS), ox, oy, oz, dx, dy, dz,
-                                           tmin, best, t4)
-                            if hit != 0:
-                                # the smallest t, ties to the first lane: the scalar loop's choice
-                                for k in range(4):
-                                    if (hit >> k) & 1 and t4[k] < best:
-                                        best = t4[k]
-                                        best_id = bids[np.uintp(4 * bk + k)]
-                                if anyhit:
-                                    done = True
-                                    break
-                        if done:
-                            break
-                # pop the next pending node; one that starts after the closest hit is skipped,
-                # not a stop: the todo stack is not ordered by entry t. A ray in a split plane
-                # (d == 0, o == split) pushes the above child with the parent's whole range,
-                # under the entries the below child's subtree pushes later with larger entry t;
-                # and tol lets a child's entry t exceed its sibling's.
-                sp = pop_within(s0, sp, best)
-                if sp < 0:
-                    break
-                spu = np.uintp(sp)
-                node = sn[spu]
-                ntmin = s0[spu]
-                ntmax = s1[spu]
-        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
-                  leaves, tests, nvis, 0)
+                    spu = np.uintp(sp)
+                    sn[spu] = above
+                    s0[spu] = ntmin
+                    s1[spu] = ntmax
+                    sp += 1
+                    node = below
+                return node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, False
+            tp = (split - o) * inv
+            neg = d < 0.0
+            first = above if neg else below
+            second = below if neg else above
+            lo_tp = tp - tol2  # the children's widened ranges end tol beyond the plane
+            hi_tp = tp + tol2
+            only_first = tp > ntmax
+            only_second = tp < ntmin
+            both = not (only_first or only_second)
+            # branch-free: always write the todo entry, keep it only when both (and, without
+            # counters, only when it is not an empty leaf: visiting one only counts)
+            spu = np.uintp(sp)
+            sn[spu] = second
+            s0[spu] = max(ntmin, lo_tp)
+            s1[spu] = ntmax
+            keep = both and (counters is not None or second >= 0)
+            sp += 1 if keep else 0
+            node = second if only_second else first
+            ntmax = min(ntmax, hi_tp) if both else ntmax
+            return node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, False
+        leaves += 1
+        cnt = w >> 2
+        x = nodes[nu + one]
+        ox = rs[0]
+        oy = rs[1]
+        oz = rs[2]
+        dx = rs[3]
+        dy = rs[4]
+        dz = rs[5]
+        if cnt == 1:  # single-triangle leaf: the triangle's index inline
+            r = np.uintp(x)
+            tests += 1
+            t = ray_triangle(ox, oy, oz, dx, dy, dz, tv[r, 0], tv[r, 1], tv[r, 2], tv[r, 3], tv[r, 4],
+                             tv[r, 5], tv[r, 6], tv[r, 7], tv[r, 8], tmin, best)
+            if t < best:
+                best = t
+                best_id = x
+                if anyhit:
+                    return node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, True
+        else:  # blocks of four from block x on, four triangles tested in vector lanes
+            tests += cnt
+            for bk in range(x, x + ((cnt + 3) >> 2)):
+                hit = ray_tri4(blk, np.uintp(bk * TRI4_WORDS), ox, oy, oz, dx, dy, dz, tmin, best, t4)
+                if hit != 0:
+                    # the smallest t, ties to the first lane: the scalar loop's choice
+                    for k in range(4):
+                        if (hit >> k) & 1 and t4[k] < best:
+                            best = t4[k]
+                            best_id = bids[np.uintp(4 * bk + k)]
+                    if anyhit:
+                        return node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, True
+    else:
+        leaves += 1  # an empty leaf: visited as pbrt does, but not stored
+    # pop the next pending node; one that starts after the closest hit is skipped, not a stop:
+    # the todo stack is not ordered by entry t. A ray in a split plane (d == 0, o == split) pushes
+    # the above child with the parent's whole range, under the entries the below child's subtree
+    # pushes later with larger entry t; and tol lets a child's entry t exceed its sibling's.
+    sp = pop_within(s0, sp, best)
+    if sp < 0:
+        return node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, True
+    spu = np.uintp(sp)
+    return sn[spu], s0[spu], s1[spu], sp, best, best_id, nvis, leaves, tests, False
+
+
+@ray_jit
+def _kd_turn(i, nxt, hi, node, ntmin, ntmax, tol2, sp, best, best_id, nvis, leaves, tests, rs, sn, s0,
+             s1, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, t4, out_t, out_id,
+             counters):
+    """One turn of one of :func:`kd_chunk`'s two rays: visit its next node; when its traversal is
+    done, write its result and start the next ray in its place. Returns the slot's new state (i,
+    nxt, node, ntmin, ntmax, tol2, sp, best, best_id, nvis, leaves, tests)."""
+    node, ntmin, ntmax, sp, best, best_id, nvis, leaves, tests, done = _kd_visit(
+        node, ntmin, ntmax, tol2, sp, best, best_id, nvis, leaves, tests, rs, sn, s0, s1, nodes,
+        nodes_f, tv, blk, bids, t4, tmin, anyhit, counters)
+    if done:
+        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1, leaves, tests,
+                  nvis, 0)
+        i, nxt, best, ntmin, ntmax, tol2 = _kd_next(nxt, hi, O, D, tmin, tmax, box, diag, rs, out_t,
+                                                    out_id, counters)
+        return i, nxt, 0, ntmin, ntmax, tol2, 0, best, -1, 0, 0, 0
+    return i, nxt, node, ntmin, ntmax, tol2, sp, best, best_id, nvis, leaves, tests
+
+
+@jit
+def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, stack_size,
+             out_t, out_id, counters):
+    """Trace rays lo..hi-1, two at a time, each with its own todo stack: every turn visits one
+    node of each (:func:`_kd_turn`), so the two rays' node-to-node chains (a load, a float32 to
+    float64 conversion, a subtract, a multiply, a compare, a select, then the next load) overlap
+    in the core instead of running one after the other (1.23-1.33x the one-ray loop's speed on
+    bunny-69k and homer-x16, paired, one thread; three or four rays at a time gained nothing more).
+    ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array; ``tv`` the triangles
+    (one-triangle leaves); ``blk``/``bids`` the blocks of four of the larger leaves (flat float32,
+    :data:`tracer.accel.simd_tri.TRI4_WORDS` a block) and their triangle indices (flat, four a
+    block, -1 padding)."""
+    t4 = np.empty(4, np.float64)  # the lanes' t of a block test
+    ra = np.empty(9, np.float64)
+    sna = np.empty(stack_size, np.int32)
+    s0a = np.empty(stack_size, np.float64)
+    s1a = np.empty(stack_size, np.float64)
+    rb = np.empty(9, np.float64)
+    snb = np.empty(stack_size, np.int32)
+    s0b = np.empty(stack_size, np.float64)
+    s1b = np.empty(stack_size, np.float64)
+    ia, nxt, besta, ntmina, ntmaxa, tol2a = _kd_next(lo, hi, O, D, tmin, tmax, box, diag, ra, out_t,
+                                                     out_id, counters)
+    ib, nxt, bestb, ntminb, ntmaxb, tol2b = _kd_next(nxt, hi, O, D, tmin, tmax, box, diag, rb, out_t,
+                                                     out_id, counters)
+    nodea, spa, ida, nva, lfa, tsa = 0, 0, -1, 0, 0, 0
+    nodeb, spb, idb, nvb, lfb, tsb = 0, 0, -1, 0, 0, 0
+    while ia >= 0 or ib >= 0:
+        if ia >= 0:
+            ia, nxt, nodea, ntmina, ntmaxa, tol2a, spa, besta, ida, nva, lfa, tsa = _kd_turn(
+                ia, nxt, hi, nodea, ntmina, ntmaxa, tol2a, spa, besta, ida, nva, lfa, tsa, ra, sna, s0a,
+                s1a, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, t4, out_t,
+                out_id, counters)
+        if ib >= 0:
+            ib, nxt, nodeb, ntminb, ntmaxb, tol2b, spb, bestb, idb, nvb, lfb, tsb = _kd_turn(
+                ib, nxt, hi, nodeb, ntminb, ntmaxb, tol2b, spb, bestb, idb, nvb, lfb, tsb, rb, snb, s0b,
+                s1b, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, t4, out_t,
+                out_id, counters)
 
 
 @pjit
