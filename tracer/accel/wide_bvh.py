@@ -24,6 +24,9 @@ Traversal: the rules of :mod:`tracer.accel.bvh4` (root box in float64, box tests
 triangle test exactly as the oracle passes them, so t and id are bit-identical to the oracle's),
 except that the hit children are pushed in the node's order for the ray's octant, nearest on top,
 with no sort, and the entry to be popped next has its cache lines prefetched (``_prefetch_entry``).
+Each block of rays is traced two rays at a time, one entry of each in turn (:func:`wide_chunk`), so
+one ray's cache misses overlap the other's work; each ray's visits, counters and result are those of
+tracing it alone.
 Counters: ``setups`` 1 per ray meeting the root box, ``nodes`` entries visited (wide nodes and leaves), ``steps`` leaves visited, ``tests`` triangles in the leaves visited (padding
 lanes not counted).
 """
@@ -35,7 +38,7 @@ import numpy as np
 from numba import prange
 
 from tracer.accel import Accel, TreeTraceMixin
-from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
+from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, ray_jit, store_ray
 from tracer.accel.bvh import bvh_build, ray_start
 from tracer.accel.geometry import INF, t_tolerance
 from tracer.accel.kdtree import root_box
@@ -243,20 +246,167 @@ def _prefetch_entry(ni, tri, words, c, nq):
         prefetch(tri, b + np.uintp(32))
 
 
+@ray_jit
+def _wide_next(nxt, hi, O, D, tmin, tmax, box, diag, W, ow, nq, rf, rq, ru, out_t, out_id, counters):
+    """Load the next ray from ``nxt`` on that meets the root box into ``rf`` (float64: the origin and
+    direction passed to the triangle test, tol), ``rq`` (float32: the origin, inverse direction and
+    tol of the box tests) and ``ru`` (word offsets of the near / far planes of the W boxes on each
+    axis, and of the ray's order word); the rays before it that miss the box get their result here.
+    Returns (its index, or -1 when none is left; the next ``nxt``; best)."""
+    Wu = np.uintp(W)
+    while nxt < hi:
+        i = nxt
+        nxt += 1
+        px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
+        if t0 <= t1:
+            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
+            rf[0] = px
+            rf[1] = py
+            rf[2] = pz
+            rf[3] = dx
+            rf[4] = dy
+            rf[5] = dz
+            rf[6] = tol
+            rq[0] = O[i, 0]
+            rq[1] = O[i, 1]
+            rq[2] = O[i, 2]
+            rq[3] = np.float32(ix)
+            rq[4] = np.float32(iy)
+            rq[5] = np.float32(iz)
+            rq[6] = np.float32(tol)
+            # s*: 0 or 3, the near plane's word group on each axis
+            ru[0] = Wu * sx
+            ru[1] = np.uintp(3) * Wu - Wu * sx
+            ru[2] = Wu + Wu * sy
+            ru[3] = np.uintp(4) * Wu - Wu * sy
+            ru[4] = np.uintp(2) * Wu + Wu * sz
+            ru[5] = np.uintp(5) * Wu - Wu * sz
+            octant = (np.uintp(1) if sx else np.uintp(0)) + (np.uintp(2) if sy else np.uintp(0)) \
+                + (np.uintp(4) if sz else np.uintp(0))
+            # where the ray's order lives: a word of the float records, three bytes of the quantised ones
+            ru[6] = ow + octant if nq is None else ow + np.uintp(ORDER_BYTES) * octant
+            return i, nxt, best
+        store_ray(out_t, out_id, counters, i, INF, -1, 0, 0, 0, 0, 0)
+    return -1, nxt, 0.0
+
+
+@ray_jit
+def _wide_visit(c, sp, best, best_id, nvis, leaves, tests, rf, rq, ru, sc, st, W, words, cw, ni, nf, nq,
+                tri, ids4, tb, t4, tmin, anyhit):
+    """One entry of one ray's traversal: a leaf's blocks are tested, or a node's W boxes, whose met
+    children are pushed near to far (the nearest is visited next, without the stack); after a leaf,
+    or a node with no child met, the next pending entry is popped. Returns the ray's new state (c,
+    sp, best, best_id, nvis, leaves, tests, done)."""
+    one, two, three, four, five = np.uintp(1), np.uintp(2), np.uintp(3), np.uintp(4), np.uintp(5)
+    nvis += 1
+    found = False
+    if c < 0:  # a leaf: its blocks of four triangles
+        v = -1 - c
+        cnt = v & 15
+        leaves += 1
+        tests += cnt
+        b0 = v >> 4
+        for bb in range(b0, b0 + ((cnt + 3) >> 2)):
+            hm = ray_tri4(tri, np.uintp(TRI4_WORDS) * np.uintp(bb), rf[0], rf[1], rf[2], rf[3], rf[4], rf[5],
+                          tmin, best, t4)
+            while hm != 0:  # lanes in order, strict <: the first of equal t, as the scalar loop
+                k = ctz(hm)
+                hm &= hm - 1
+                if t4[k] < best:
+                    best = t4[k]
+                    best_id = ids4[np.uintp(4 * bb + k)]
+            if anyhit and best_id >= 0:
+                return c, sp, best, best_id, nvis, leaves, tests, True
+    else:
+        base = words * np.uintp(c)
+        lim = np.float32(best + rf[6])
+        tmin32 = np.float32(tmin)
+        if nq is not None:
+            qb = np.uintp(4) * base + np.uintp(4 * HEADER)
+            if W == 8:
+                mask = slabq8(nq, qb, ru[0], ru[1], ru[2], ru[3], ru[4], ru[5], nf[base], nf[base + one],
+                              nf[base + two], nf[base + three], nf[base + four], nf[base + five],
+                              rq[0], rq[1], rq[2], rq[3], rq[4], rq[5], tmin32, lim, rq[6], tb)
+            else:
+                mask = slabq4(nq, qb, ru[0], ru[1], ru[2], ru[3], ru[4], ru[5], nf[base], nf[base + one],
+                              nf[base + two], nf[base + three], nf[base + four], nf[base + five],
+                              rq[0], rq[1], rq[2], rq[3], rq[4], rq[5], tmin32, lim, rq[6], tb)
+        elif W == 8:
+            mask = slab8(nf, base, ru[0], ru[1], ru[2], ru[3], ru[4], ru[5], rq[0], rq[1], rq[2], rq[3], rq[4],
+                         rq[5], tmin32, lim, rq[6], tb)
+        else:
+            mask = slab4(nf, base, ru[0], ru[1], ru[2], ru[3], ru[4], ru[5], rq[0], rq[1], rq[2], rq[3], rq[4],
+                         rq[5], tmin32, lim, rq[6], tb)
+        found = mask != 0
+        if found:
+            nh = popc(mask)
+            if nh == 1:  # one child met: visit it, no stack
+                c = ni[base + cw + np.uintp(ctz(mask))]
+            else:  # the met children near to far from the order word; nearest on top
+                octant = ru[6]
+                if nq is None:
+                    perm = ni[base + octant]
+                else:
+                    ob = np.uintp(4) * base + octant
+                    perm = np.int32(nq[ob]) | (np.int32(nq[ob + one]) << 8) | (np.int32(nq[ob + two]) << 16)
+                top = sp + nh - 1
+                j = top
+                # every child in order is written at j, which moves down only past a met one: a
+                # child not met is overwritten by the next met one, and the loop ends after the
+                # farthest met child. No branch on each child's hit bit, which random rays
+                # mispredict (paired new/old, 1 thread, 15 rounds, t and id identical: random rays
+                # 0.93-0.96x the time on 5 meshes, camera 0.97-1.01x)
+                while True:
+                    k = perm & 7
+                    perm >>= 3
+                    ju = np.uintp(j)
+                    sc[ju] = ni[base + cw + np.uintp(k)]
+                    st[ju] = np.float64(tb[k])
+                    j -= (mask >> k) & 1
+                    if j < sp:
+                        break
+                c = sc[np.uintp(top)]
+                sp = top
+                # the second nearest is visited after c's subtree
+                _prefetch_entry(ni, tri, words, sc[np.uintp(top - 1)], nq)
+    if not found:  # pop the nearest pending entry that may still hold a closer hit
+        sp = pop_within(st, sp, best + rf[6])
+        if sp < 0:
+            return c, sp, best, best_id, nvis, leaves, tests, True
+        c = sc[np.uintp(sp)]
+        if sp > 0:
+            _prefetch_entry(ni, tri, words, sc[np.uintp(sp - 1)], nq)
+    return c, sp, best, best_id, nvis, leaves, tests, False
+
+
+@ray_jit
+def _wide_turn(i, nxt, hi, c, sp, best, best_id, nvis, leaves, tests, rf, rq, ru, sc, st, O, D, tmin, tmax,
+               anyhit, box, diag, W, words, cw, ow, ni, nf, nq, tri, ids4, tb, t4, out_t, out_id, counters):
+    """One turn of one of :func:`wide_chunk`'s two rays: visit its next entry; when its traversal is
+    done, write its result and start the next ray in its place. Returns the slot's new state (i,
+    nxt, c, sp, best, best_id, nvis, leaves, tests)."""
+    c, sp, best, best_id, nvis, leaves, tests, done = _wide_visit(
+        c, sp, best, best_id, nvis, leaves, tests, rf, rq, ru, sc, st, W, words, cw, ni, nf, nq, tri, ids4,
+        tb, t4, tmin, anyhit)
+    if done:
+        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1, leaves, tests, nvis, 0)
+        i, nxt, best = _wide_next(nxt, hi, O, D, tmin, tmax, box, diag, W, ow, nq, rf, rq, ru, out_t, out_id,
+                                  counters)
+        return i, nxt, 0, 0, best, -1, 0, 0, 0
+    return i, nxt, c, sp, best, best_id, nvis, leaves, tests
+
+
 @jit
 def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, ids4, stack_size,
                out_t, out_id, counters):
-    """Trace rays lo..hi-1 with one stack. ``ni``/``nf``: flat int32 / float32 views of the node records;
-    ``nq`` their uint8 view for the quantised records (:mod:`tracer.accel.wide_quant`), None for the
-    float ones (Numba compiles each layout on its own); ``tri``: flat float32 blocks of four
-    triangles; ``ids4`` flat."""
-    sc = np.empty(stack_size, np.int64)
-    st = np.empty(stack_size, np.float64)
+    """Trace rays lo..hi-1, two at a time, each with its own stack: every turn visits one entry of
+    each (:func:`_wide_turn`), so the two rays' memory loads and dependency chains overlap in the
+    core. ``ni``/``nf``: flat int32 / float32 views of the node records; ``nq`` their uint8 view
+    for the quantised records (:mod:`tracer.accel.wide_quant`), None for the float ones (Numba
+    compiles each layout on its own); ``tri``: flat float32 blocks of four triangles; ``ids4``
+    flat."""
     tb = np.empty(8, np.float32)
     t4 = np.empty(4, np.float64)
-    tmin32 = np.float32(tmin)
-    one, two, three, four, five = np.uintp(1), np.uintp(2), np.uintp(3), np.uintp(4), np.uintp(5)
-    Wu = np.uintp(W)
     if nq is None:  # words per record, offset of the child words, of the order words
         words = np.uintp(7 * W + NORD)
         cw = np.uintp(6 * W)
@@ -265,118 +415,31 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
         words = np.uintp(qnode_words(W, NORD))
         cw = np.uintp(child_word(W))
         ow = np.uintp(order_byte(W))
-    for i in range(lo, hi):
-        px, py, pz, dx, dy, dz, ix, iy, iz, sx, sy, sz, best, t0, t1 = ray_start(O, D, i, box, tmin, tmax)
-        best_id = -1
-        nvis = 0
-        leaves = 0
-        tests = 0
-        in_box = t0 <= t1
-        if in_box:
-            tol = t_tolerance(t0, t1, diag, ix, iy, iz)
-            ox = O[i, 0]
-            oy = O[i, 1]
-            oz = O[i, 2]
-            jx = np.float32(ix)
-            jy = np.float32(iy)
-            jz = np.float32(iz)
-            tol32 = np.float32(tol)
-            # word offsets of the near / far planes of the W boxes on each axis (s*: 0 or 3)
-            nxo = Wu * sx
-            fxo = np.uintp(3) * Wu - nxo
-            nyo = Wu + Wu * sy
-            fyo = np.uintp(4) * Wu - Wu * sy
-            nzo = np.uintp(2) * Wu + Wu * sz
-            fzo = np.uintp(5) * Wu - Wu * sz
-            octant = (np.uintp(1) if sx else np.uintp(0)) + (np.uintp(2) if sy else np.uintp(0)) \
-                + (np.uintp(4) if sz else np.uintp(0))
-            # where the ray's order lives: a word of the float records, three bytes of the quantised ones
-            octant = ow + octant if nq is None else ow + np.uintp(ORDER_BYTES) * octant
-            sp = 0
-            c = 0
-            while True:
-                nvis += 1
-                if c < 0:  # a leaf: its blocks of four triangles
-                    v = -1 - c
-                    cnt = v & 15
-                    leaves += 1
-                    tests += cnt
-                    done = False
-                    b0 = v >> 4
-                    for bb in range(b0, b0 + ((cnt + 3) >> 2)):
-                        hm = ray_tri4(tri, np.uintp(TRI4_WORDS) * np.uintp(bb), px, py, pz, dx, dy, dz, tmin, best, t4)
-                        while hm != 0:  # lanes in order, strict <: the first of equal t, as the scalar loop
-                            k = ctz(hm)
-                            hm &= hm - 1
-                            if t4[k] < best:
-                                best = t4[k]
-                                best_id = ids4[np.uintp(4 * bb + k)]
-                        if anyhit and best_id >= 0:
-                            done = True
-                            break
-                    if done:
-                        break
-                    found = False
-                else:
-                    base = words * np.uintp(c)
-                    lim = np.float32(best + tol)
-                    if nq is not None:
-                        qb = np.uintp(4) * base + np.uintp(4 * HEADER)
-                        if W == 8:
-                            mask = slabq8(nq, qb, nxo, fxo, nyo, fyo, nzo, fzo, nf[base], nf[base + one],
-                                          nf[base + two], nf[base + three], nf[base + four], nf[base + five],
-                                          ox, oy, oz, jx, jy, jz, tmin32, lim, tol32, tb)
-                        else:
-                            mask = slabq4(nq, qb, nxo, fxo, nyo, fyo, nzo, fzo, nf[base], nf[base + one],
-                                          nf[base + two], nf[base + three], nf[base + four], nf[base + five],
-                                          ox, oy, oz, jx, jy, jz, tmin32, lim, tol32, tb)
-                    elif W == 8:
-                        mask = slab8(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tmin32, lim,
-                                     tol32, tb)
-                    else:
-                        mask = slab4(nf, base, nxo, fxo, nyo, fyo, nzo, fzo, ox, oy, oz, jx, jy, jz, tmin32, lim,
-                                     tol32, tb)
-                    found = mask != 0
-                    if found:
-                        nh = popc(mask)
-                        if nh == 1:  # one child met: visit it, no stack
-                            c = ni[base + cw + np.uintp(ctz(mask))]
-                        else:  # the met children near to far from the order word; nearest on top
-                            if nq is None:
-                                perm = ni[base + octant]
-                            else:
-                                ob = np.uintp(4) * base + octant
-                                perm = np.int32(nq[ob]) | (np.int32(nq[ob + one]) << 8) \
-                                    | (np.int32(nq[ob + two]) << 16)
-                            top = sp + nh - 1
-                            j = top
-                            # every child in order is written at j, which moves down only past a met
-                            # one: a child not met is overwritten by the next met one, and the loop ends
-                            # after the farthest met child. No branch on each child's hit bit, which
-                            # random rays mispredict (paired new/old, 1 thread, 15 rounds, t and id
-                            # identical: random rays 0.93-0.96x the time on 5 meshes, camera 0.97-1.01x)
-                            while True:
-                                k = perm & 7
-                                perm >>= 3
-                                ju = np.uintp(j)
-                                sc[ju] = ni[base + cw + np.uintp(k)]
-                                st[ju] = np.float64(tb[k])
-                                j -= (mask >> k) & 1
-                                if j < sp:
-                                    break
-                            c = sc[np.uintp(top)]
-                            sp = top
-                            # the second nearest is visited after c's subtree
-                            _prefetch_entry(ni, tri, words, sc[np.uintp(top - 1)], nq)
-                if not found:  # pop the nearest pending entry that may still hold a closer hit
-                    sp = pop_within(st, sp, best + tol)
-                    if sp < 0:
-                        break
-                    c = sc[np.uintp(sp)]
-                    if sp > 0:
-                        _prefetch_entry(ni, tri, words, sc[np.uintp(sp - 1)], nq)
-        store_ray(out_t, out_id, counters, i, best if best_id >= 0 else INF, best_id, 1 if in_box else 0,
-                  leaves, tests, nvis, 0)
+    rfa = np.empty(8, np.float64)
+    rqa = np.empty(8, np.float32)
+    rua = np.empty(8, np.uintp)
+    sca = np.empty(stack_size, np.int64)
+    sta = np.empty(stack_size, np.float64)
+    rfb = np.empty(8, np.float64)
+    rqb = np.empty(8, np.float32)
+    rub = np.empty(8, np.uintp)
+    scb = np.empty(stack_size, np.int64)
+    stb = np.empty(stack_size, np.float64)
+    ia, nxt, besta = _wide_next(lo, hi, O, D, tmin, tmax, box, diag, W, ow, nq, rfa, rqa, rua, out_t, out_id,
+                                counters)
+    ib, nxt, bestb = _wide_next(nxt, hi, O, D, tmin, tmax, box, diag, W, ow, nq, rfb, rqb, rub, out_t, out_id,
+                                counters)
+    ca, spa, ida, nva, lfa, tsa = 0, 0, -1, 0, 0, 0
+    cb, spb, idb, nvb, lfb, tsb = 0, 0, -1, 0, 0, 0
+    while ia >= 0 or ib >= 0:
+        if ia >= 0:
+            ia, nxt, ca, spa, besta, ida, nva, lfa, tsa = _wide_turn(
+                ia, nxt, hi, ca, spa, besta, ida, nva, lfa, tsa, rfa, rqa, rua, sca, sta, O, D, tmin, tmax,
+                anyhit, box, diag, W, words, cw, ow, ni, nf, nq, tri, ids4, tb, t4, out_t, out_id, counters)
+        if ib >= 0:
+            ib, nxt, cb, spb, bestb, idb, nvb, lfb, tsb = _wide_turn(
+                ib, nxt, hi, cb, spb, bestb, idb, nvb, lfb, tsb, rfb, rqb, rub, scb, stb, O, D, tmin, tmax,
+                anyhit, box, diag, W, words, cw, ow, ni, nf, nq, tri, ids4, tb, t4, out_t, out_id, counters)
 
 
 @pjit
