@@ -303,7 +303,7 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, bl
 @pjit
 def kd_trace(O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, blk, bids, stack_size,
              out_t, out_id, counters, nt):
-    """Batched kd-tree traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer.accel._jit.BLOCK`), one todo stack per block.
+    """Batched kd-tree traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of BLOCK rays (:data:`tracer.accel._jit.BLOCK`), two rays at a time, each with its own todo stack (:func:`kd_chunk`).
     ``counters`` is an (m, 5) int32 array or None (None compiles the variant without counting)."""
     m = O.shape[0]
     for th in prange(nt):

@@ -446,8 +446,8 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
 def wide_trace(O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, ids4, stack_size, out_t, out_id,
                counters, nt):
     """Batched wide-BVH traversal, ``prange`` over the ``nt`` threads, each taking every nt-th block of
-    BLOCK rays (:data:`tracer.accel._jit.BLOCK`), one stack per block; ``counters`` or None (the
-    variant without counting)."""
+    BLOCK rays (:data:`tracer.accel._jit.BLOCK`), two rays at a time, each with its own stack
+    (:func:`wide_chunk`); ``counters`` or None (the variant without counting)."""
     m = O.shape[0]
     for th in prange(nt):
         for b in range(th, nblocks(m), nt):
