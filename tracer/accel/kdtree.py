@@ -266,8 +266,9 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, bl
     """Trace rays lo..hi-1, two at a time, each with its own todo stack: every turn visits one
     node of each (:func:`_kd_turn`), so the two rays' node-to-node chains (a load, a float32 to
     float64 conversion, a subtract, a multiply, a compare, a select, then the next load) overlap
-    in the core instead of running one after the other (1.23-1.33x the one-ray loop's speed on
-    bunny-69k and homer-x16, paired, one thread; three or four rays at a time gained nothing more).
+    in the core instead of running one after the other (1.20-1.34x the one-ray loop's speed on
+    eight meshes, random and camera rays, paired, one thread; three or four rays at a time gained
+    nothing more).
     ``nodes``/``nodes_f``: the flat int32 / float32 views of the node array; ``tv`` the triangles
     (one-triangle leaves); ``blk``/``bids`` the blocks of four of the larger leaves (flat float32,
     :data:`tracer.accel.simd_tri.TRI4_WORDS` a block) and their triangle indices (flat, four a
