@@ -401,7 +401,7 @@ def wide_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, W, ni, nf, nq, tri, 
                out_t, out_id, counters):
     """Trace rays lo..hi-1, two at a time, each with its own stack: every turn visits one entry of
     each (:func:`_wide_turn`), so the two rays' memory loads and dependency chains overlap in the
-    core (paired against one ray at a time, 1 thread, eight meshes: random rays 0.90-0.95x the
+    core (paired against one ray at a time, 1 thread, eight meshes: random rays 0.90-0.98x the
     time, camera rays 0.96-1.06x, as each entry loads the ray's constants from its arrays).
     ``ni``/``nf``: flat int32 / float32 views of the node records; ``nq`` their uint8 view
     for the quantised records (:mod:`tracer.accel.wide_quant`), None for the float ones (Numba
