@@ -8,6 +8,8 @@ calibrating the structure it predicts").
 * :func:`fit_sah_constants` — the fitted estimator for ``build(scene, "kdtree", constants=fit)``
   from measured points: per (scene, ray kind, build setting), mean counters per ray and the median
   time per ray (:func:`experiments.core.probes.measure_kd_points` measures them; nothing here times).
+* :func:`kind_costs` — per ray kind, a step's and a test's cost fitted apart (the BVH's fit below and
+  the grid's density, :mod:`costmodel.griddensity`).
 * :class:`BvhSahFit` / :func:`fit_bvh_trav_cost` — the same for the BVH's SAH: the binary BVH's time
   per ray fitted to its counters per ray kind, ``trav_cost_`` = C_trav / C_isect for
   ``build(scene, "bvh" | "bvh4", trav_cost=fit.trav_cost_)`` (pbrt-v2's setting is 1/8).
@@ -98,6 +100,26 @@ BVH_SETTINGS = ({}, {"trav_cost": 0.5}, {"trav_cost": 2.0}, {"max_leaf": 1}, {"m
 BVH_CALIBRATION = ("bunny-16k", "dragon-11k", "teapot")
 
 
+def kind_costs(points, step: str, intercept: bool) -> tuple[dict, dict, dict, dict]:
+    """Per ray kind, the time per ray fitted as [c_0 +] c_step x ``p[step]`` + c_test x ``p["tests"]``
+    (:func:`relative_nnls`) over that kind's ``points`` (dicts with "kind", the two counters and
+    "s_per_ray"). Returns ({kind: c_step}, {kind: c_test}, {kind: MAPE %}) of the kinds whose fit
+    separated the two costs, in ns, and {kind: (c_step, c_test)} of those it did not: a cost a
+    millionth of the other's is none, and a ratio of the two would be 0 or infinite."""
+    c_step, c_test, mape, free = {}, {}, {}, {}
+    for kind in dict.fromkeys(p["kind"] for p in points):
+        pk = [p for p in points if p["kind"] == kind]
+        A = np.array([[1.0] * intercept + [p[step], p["tests"]] for p in pk], float)
+        y = np.array([p["s_per_ray"] for p in pk]) * 1e9
+        coef = relative_nnls(A, y)
+        cs, ct = float(coef[-2]), float(coef[-1])
+        if not (cs > 1e-6 * ct and ct > 1e-6 * cs):
+            free[kind] = (cs, ct)
+            continue
+        c_step[kind], c_test[kind], mape[kind] = cs, ct, _metrics(y, A @ coef)["mape"]
+    return c_step, c_test, mape, free
+
+
 class BvhSahFit:
     """The BVH's SAH traversal weight measured on this machine. Per ray kind, T/ray = c_node nodes +
     c_test tests (non-negative least squares on relative residuals; no intercept and no leaf term:
@@ -117,17 +139,8 @@ class BvhSahFit:
         self.default, self.strict = default, strict
 
     def fit(self, points):
-        self.c_node_, self.c_test_, self.mape_, self.ratios_, self.free_ = {}, {}, {}, {}, {}
-        for kind in dict.fromkeys(p["kind"] for p in points):
-            pk = [p for p in points if p["kind"] == kind]
-            A = np.array([[p["nodes"], p["tests"]] for p in pk], float)
-            y = np.array([p["s_per_ray"] for p in pk]) * 1e9
-            cn, ct = relative_nnls(A, y)
-            if not (cn > 1e-6 * ct and ct > 1e-6 * cn):  # a cost a millionth of the other's is none
-                self.free_[kind] = (float(cn), float(ct))
-                continue
-            self.c_node_[kind], self.c_test_[kind], self.ratios_[kind] = float(cn), float(ct), float(cn / ct)
-            self.mape_[kind] = _metrics(y, A @ np.array([cn, ct]))["mape"]
+        self.c_node_, self.c_test_, self.mape_, self.free_ = kind_costs(points, "nodes", intercept=False)
+        self.ratios_ = {k: self.c_node_[k] / self.c_test_[k] for k in self.c_node_}
         self.fallback_ = not self.ratios_
         if self.fallback_ and self.strict:
             from tracer.errors import GridcostError

@@ -76,7 +76,7 @@ def test_verify_suite_json_is_one_object(run_cli, tmp_path):
 def test_bench_json(run_cli, tmp_path):
     out_dir = tmp_path / "results"
     out = _json(run_cli("bench", "--scene", "bunny-948", "--rays", "5000", "--repeats", "1",
-                        "--structures", "grid,bvh4,bvh4-sah-fit,embree", "--threads", "1", "--sah-scenes", "bunny-948",
+                        "--structures", "grid,grid-fit,bvh4,bvh4-sah-fit,embree", "--threads", "1", "--sah-scenes", "bunny-948",
                         "--json", "--out", str(out_dir)))
     assert out["scene"] == "bunny-948" and out["faces"] == 948 and out["rays"] == 5000
     grid = out["structures"]["grid"]
@@ -100,6 +100,13 @@ def test_bench_json(run_cli, tmp_path):
     assert fit["fallback"] == (not fitted) and fit["trav_cost"] == pytest.approx(expected)
     assert out["structures"]["bvh4-sah-fit"]["params"] == {"trav_cost": fit["trav_cost"]}
     assert f"C_trav/C_isect = {fit['trav_cost']:.3f}" in summary
+    # the grid at Ize's Eq 4 with T_i/T_s fitted in this run on the same calibration mesh
+    gfit = out["grid_density_fit"]
+    assert gfit["scenes"] == ["bunny-948"] and 0.125 <= gfit["factor"] <= 64.0
+    assert gfit["fallback"] or gfit["factor"] == pytest.approx(min(max(2 * gfit["ti_over_ts"], 0.125), 64.0))
+    assert out["structures"]["grid-fit"]["params"] == {"factor": gfit["factor"]}
+    assert out["structures"]["grid-fit"]["stats"]["cells"] != grid["stats"]["cells"] or gfit["factor"] == 4.0
+    assert f"grid-fit: the grid with M = 2N T_i/T_s cells (Ize 2007 Eq 4), {gfit['factor']:.2f}N" in summary
     if not EmbreeAccel.available():
         assert "embree" in out["unavailable"]
         pytest.skip("embreex is not installed: Embree assertions skipped")
@@ -111,7 +118,7 @@ def test_bench_json(run_cli, tmp_path):
     # Embree traces on one thread: more of ours are compared per thread, and the name says so
     assert ("per thread" in key) == (out["threads"] > 1)
     # the headline structures that ran are paired with Embree in the same rounds
-    assert set(out["paired"]) == {"grid/embree", "bvh4/embree", "bvh4-sah-fit/embree"}
+    assert set(out["paired"]) == {"grid/embree", "grid-fit/embree", "bvh4/embree", "bvh4-sah-fit/embree"}
     for v in out["paired"].values():
         assert set(v) == {"random", "camera"} and all(0 < k["min"] <= k["ratio"] <= k["max"] for k in v.values())
     assert "| bvh4/embree | " in summary

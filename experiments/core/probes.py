@@ -5,9 +5,10 @@ builds or times anything, it receives these numbers.
   sample of rays (decision step 2, and the calibration's samples);
 * :func:`probe`, :func:`decide` — a :class:`costmodel.select.Selector`'s steps 1-2 measured on a
   scene, and its whole decision;
-* :func:`measure_kd_points`, :func:`measure_sah_constants`, :func:`measure_bvh_trav_cost` — the
-  kd-tree's and the BVH's counters and times per build setting, and the SAH constants fitted to them
-  (:mod:`costmodel.kdcost`).
+* :func:`measure_kd_points`, :func:`measure_sah_constants`, :func:`measure_bvh_trav_cost`,
+  :func:`measure_grid_density` — a structure's counters and times per build setting, and what is
+  fitted to them: the kd-tree's and the BVH's SAH constants (:mod:`costmodel.kdcost`), the grid's
+  cells per triangle (:mod:`costmodel.griddensity`).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from costmodel.griddensity import GRID_CALIBRATION, GRID_SETTINGS, GridDensityFit, fit_grid_density
 from costmodel.havran import havran_stats
 from costmodel.kdcost import (BVH_CALIBRATION, BVH_SETTINGS, DEFAULT_SETTINGS, BvhSahFit, KdCostFit, fit_bvh_trav_cost,
                               fit_sah_constants)
@@ -101,7 +103,8 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
                       repeats: int = 5, seed: int = 0, clock=None, structure: str = "kdtree",
                       min_sample: float = MIN_SAMPLE_SECONDS) -> list[dict]:
     """One point per (scene, ray kind, build setting of ``structure``, the kd-tree by default):
-    per-ray means of the counters and the median seconds per ray of the non-counting kernel
+    per-ray means of the counters ("leaves" and "steps" are both the ``steps`` counter: a kd-tree's
+    leaves, a grid's cells) and the median seconds per ray of the non-counting kernel
     (:func:`tracer.measure.timing.time_call`, warm-up first; ``clock`` and ``min_sample`` as
     :func:`tracer.measure.timing.time_call`'s, e.g. ``time.thread_time`` on a loaded machine).
     ``scenes`` are Scene objects or registry names. Run it single-threaded."""
@@ -117,7 +120,7 @@ def measure_kd_points(scenes, kinds=("random", "camera"), settings=DEFAULT_SETTI
                                clock=clock, min_sample=min_sample)
                 m = cnt.mean()
                 out.append({"scene": scene.name, "kind": kind, "params": dict(params), "rays": r.n,
-                            "nodes": m["nodes"], "leaves": m["steps"], "tests": m["tests"],
+                            "nodes": m["nodes"], "leaves": m["steps"], "steps": m["steps"], "tests": m["tests"],
                             "s_per_ray": tm.median / r.n, "spread": tm.spread})
     return out
 
@@ -132,3 +135,10 @@ def measure_bvh_trav_cost(scenes=BVH_CALIBRATION, settings=BVH_SETTINGS, strict:
     """The BVH's SAH traversal weight on this machine: the binary BVH at ``settings`` on ``scenes``,
     then :func:`costmodel.kdcost.fit_bvh_trav_cost`."""
     return fit_bvh_trav_cost(measure_kd_points(scenes, settings=settings, structure="bvh", **measure), strict=strict)
+
+
+def measure_grid_density(scenes=GRID_CALIBRATION, settings=GRID_SETTINGS, strict: bool = False,
+                         **measure) -> GridDensityFit:
+    """The uniform grid's cells per triangle for this machine: the grid at ``settings`` (densities)
+    on ``scenes``, then :func:`costmodel.griddensity.fit_grid_density`."""
+    return fit_grid_density(measure_kd_points(scenes, settings=settings, structure="grid", **measure), strict=strict)

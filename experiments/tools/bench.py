@@ -35,7 +35,7 @@ def default_names() -> list[str]:
 
 
 #: the structures whose Embree ratio is also measured in interleaved rounds (the headline ratios)
-PAIRED = ("grid", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "wbvh-leaf4", "wbvh-quant", "cgt")
+PAIRED = ("grid", "grid-fit", "kdtree-fast", "bvh4", "bvh4-sah-fit", "wbvh", "wbvh-leaf4", "wbvh-quant", "cgt")
 
 
 #: bytes trimesh's tracer holds per (ray, face) pair: its rtree returns a ray's candidate faces,
@@ -61,8 +61,8 @@ def add_arguments(p) -> None:
     p.add_argument("--trimesh-rays", type=int, default=2000, help="rays for trimesh's tracer")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sah-scenes", default=None,
-                   help="meshes bvh4-sah-fit calibrates the BVH's SAH weight on (default: "
-                        "costmodel.kdcost.BVH_CALIBRATION, none of them a bench mesh)")
+                   help="meshes bvh4-sah-fit calibrates the BVH's SAH weight on, and grid-fit the grid's "
+                        "density (default: costmodel.kdcost.BVH_CALIBRATION, none of them a bench mesh)")
 
 
 def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, object]:
@@ -83,20 +83,33 @@ def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, ob
 
 
 def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
-    """``params`` with a "fitted" trav_cost replaced by the BVH SAH weight measured in this run (once;
-    its summary and seconds go to ``out["bvh_sah_fit"]``)."""
-    if params.get("trav_cost") != "fitted":
-        return params
-    if "bvh_sah_fit" not in out:
-        from costmodel.kdcost import BVH_CALIBRATION
-        from experiments.core.probes import measure_bvh_trav_cost
-        t0 = time.perf_counter()
-        fit = measure_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
-        out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
-        log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
-            f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)"
-            + (f"; {fit.note()}" if fit.free_ else ""))
-    return {**params, "trav_cost": out["bvh_sah_fit"]["trav_cost"]}
+    """``params`` with a "fitted" setting replaced by what this run measures (once per run, its
+    summary and seconds in ``out``): a "fitted" trav_cost by the BVH SAH weight (``out["bvh_sah_fit"]``),
+    a "fitted" grid factor by the cells per triangle of Ize's Eq 4 at this machine's T_i / T_s
+    (``out["grid_density_fit"]``); both calibrate on ``sah_scenes``."""
+    if params.get("trav_cost") == "fitted":
+        if "bvh_sah_fit" not in out:
+            from costmodel.kdcost import BVH_CALIBRATION
+            from experiments.core.probes import measure_bvh_trav_cost
+            t0 = time.perf_counter()
+            fit = measure_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
+            out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
+            log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
+                f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)"
+                + (f"; {fit.note()}" if fit.free_ else ""))
+        return {**params, "trav_cost": out["bvh_sah_fit"]["trav_cost"]}
+    if params.get("factor") == "fitted":
+        if "grid_density_fit" not in out:
+            from costmodel.griddensity import GRID_CALIBRATION
+            from experiments.core.probes import measure_grid_density
+            t0 = time.perf_counter()
+            fit = measure_grid_density(tuple(sah_scenes or GRID_CALIBRATION))
+            out["grid_density_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
+            log(f"  grid density fitted on {', '.join(out['grid_density_fit']['scenes'])}: T_i/T_s "
+                f"{fit.ti_over_ts_:.3f}, {fit.factor_:.2f}N cells ({out['grid_density_fit']['seconds']:.0f} s)"
+                + (f"; {fit.note()}" if fit.note() else ""))
+        return {**params, "factor": out["grid_density_fit"]["factor"]}
+    return params
 
 
 def run_bench(scene, names, n_rays, repeats, threads, trimesh_rays=2000, seed=0, log=print,
@@ -362,6 +375,17 @@ def _summary(out: dict) -> str:
                       + ", ".join(f"{k} {fit[f'{k}_ratio']:.2f} (MAPE {fit[f'{k}_mape']:.1f} %)"
                                   for k in ("random", "camera") if f"{k}_ratio" in fit)
                       + f"), geometric mean; {fit['seconds']:.0f} s."]
+    gfit = out.get("grid_density_fit")
+    if gfit:
+        how = ("; ".join(f"{k} {gfit[f'{k}_ratio']:.2f} (MAPE {gfit[f'{k}_mape']:.1f} %)"
+                         for k in ("random", "camera") if f"{k}_ratio" in gfit) or "no kind separated the two")
+        lines += ["", f"grid-fit: the grid with M = 2N T_i/T_s cells (Ize 2007 Eq 4), {gfit['factor']:.2f}N: T_i/T_s fitted "
+                      f"in this run on {', '.join(gfit['scenes'])} (the grid at several densities, time per ray against "
+                      f"its cell steps and triangle tests per ray kind, c_test / c_step: {how}, geometric mean "
+                      f"{gfit['ti_over_ts']:.3f}; the paper's T_i/T_s is {gfit['paper_ti_over_ts']:g}, which gives "
+                      f"{2 * gfit['paper_ti_over_ts']:g}N); {gfit['seconds']:.0f} s"
+                      + (" (fallback: the timings did not separate a step from a test)" if gfit["fallback"] else "")
+                      + (" (clipped to the swept range)" if gfit["clipped"] else "") + "."]
     for k, v in out["unavailable"].items():
         lines.append(f"\nUnavailable: {k}: {v}")
     return "\n".join(lines) + "\n"

@@ -25,7 +25,9 @@ SUITE_SCENES = ("bunny-69k", "dragon-48k", "fandisk", "cornell", "cylinder-3996"
                 "dragon-11k", "particles-10k", "dragon-11k-far1e5", "dragon-11k-size1e-4", "dragon-11k-size1e4")
 #: bench variants ``--suite`` leaves out, and why
 NOT_IN_SUITE = {"bvh4-sah-fit": "its SAH weight is measured in bench's own run; the tree is a bvh4 built "
-                                "with another weight, and bvh4 is verified with pbrt's"}
+                                "with another weight, and bvh4 is verified with pbrt's",
+                "grid-fit": "its density is measured in bench's own run; the grid is the same kernel at another "
+                            "cell count, and grid is verified at 4N and 8N"}
 
 
 def add_arguments(p) -> None:

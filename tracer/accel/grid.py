@@ -423,6 +423,9 @@ class UniformGrid(Accel):
         if layout not in ("auto", "copy", "blocks", "index"):
             raise GridcostError(f"grid layout must be 'auto', 'copy', 'blocks' or 'index', got {layout!r}")
         self.layout = layout
+        for what, v in (("cell count", cells), ("factor", factor)):  # e.g. bench's unresolved "fitted"
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating))):
+                raise GridcostError(f"grid {what} must be a number, got {v!r}")
         self.cells, self.res, self.rule, self.lam = cells, res, rule, lam
         self.clamp, self.exact, self.mailbox, self.factor = clamp, exact, mailbox, factor
         if macro and (int(macro) & (int(macro) - 1)):

@@ -6,6 +6,9 @@ from __future__ import annotations
 VARIANTS = {
     "grid": ("grid", {"factor": 4.0}),
     "grid-8N": ("grid", {"factor": 8.0}),
+    # M = 2N T_i/T_s (Ize 2007 Eq 4) with T_i/T_s measured on this machine in the same run
+    # (costmodel.griddensity.GridDensityFit, on calibration meshes none of which bench reports on)
+    "grid-fit": ("grid", {"factor": "fitted"}),
     "grid-bbox": ("grid", {"factor": 4.0, "exact": False}),
     "grid-mailbox": ("grid", {"factor": 4.0, "mailbox": True}),
     "grid-macro": ("grid", {"factor": 4.0, "macro": 4}),
