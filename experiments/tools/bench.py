@@ -82,33 +82,33 @@ def _bench_one(accel_fn, rays_by_kind, repeats, counters=True) -> tuple[dict, ob
     return row, accel
 
 
+#: the settings bench measures in its own run when a variant asks for "fitted": setting -> (where
+#: the fit's summary goes in the output, the probe in experiments.core.probes that measures and fits
+#: it on the calibration meshes, what the log says of the fit)
+FITTED = {
+    "trav_cost": ("bvh_sah_fit", "measure_bvh_trav_cost",
+                  lambda f: f"BVH SAH weight C_trav/C_isect {f.trav_cost_:.3f} (pbrt-v2: 0.125)"),
+    "factor": ("grid_density_fit", "measure_grid_density",
+               lambda f: f"grid density T_i/T_s {f.ti_over_ts_:.3f}, {f.factor_:.2f}N cells (Ize Eq 4)"),
+}
+
+
 def _fitted_params(params: dict, out: dict, sah_scenes, log) -> dict:
-    """``params`` with a "fitted" setting replaced by what this run measures (once per run, its
-    summary and seconds in ``out``): a "fitted" trav_cost by the BVH SAH weight (``out["bvh_sah_fit"]``),
-    a "fitted" grid factor by the cells per triangle of Ize's Eq 4 at this machine's T_i / T_s
-    (``out["grid_density_fit"]``); both calibrate on ``sah_scenes``."""
-    if params.get("trav_cost") == "fitted":
-        if "bvh_sah_fit" not in out:
-            from costmodel.kdcost import BVH_CALIBRATION
-            from experiments.core.probes import measure_bvh_trav_cost
+    """``params`` with a "fitted" setting (:data:`FITTED`) replaced by what this run measures on
+    ``sah_scenes`` (or the probe's default calibration meshes), once per run: its summary and
+    seconds go to ``out``."""
+    for key, (slot, probe, say) in FITTED.items():
+        if params.get(key) != "fitted":
+            continue
+        if slot not in out:
+            from experiments.core import probes
             t0 = time.perf_counter()
-            fit = measure_bvh_trav_cost(tuple(sah_scenes or BVH_CALIBRATION))
-            out["bvh_sah_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
-            log(f"  BVH SAH weight fitted on {', '.join(out['bvh_sah_fit']['scenes'])}: C_trav/C_isect "
-                f"{fit.trav_cost_:.3f} (pbrt-v2: 0.125; {out['bvh_sah_fit']['seconds']:.0f} s)"
-                + (f"; {fit.note()}" if fit.free_ else ""))
-        return {**params, "trav_cost": out["bvh_sah_fit"]["trav_cost"]}
-    if params.get("factor") == "fitted":
-        if "grid_density_fit" not in out:
-            from costmodel.griddensity import GRID_CALIBRATION
-            from experiments.core.probes import measure_grid_density
-            t0 = time.perf_counter()
-            fit = measure_grid_density(tuple(sah_scenes or GRID_CALIBRATION))
-            out["grid_density_fit"] = {**fit.summary(), "seconds": time.perf_counter() - t0}
-            log(f"  grid density fitted on {', '.join(out['grid_density_fit']['scenes'])}: T_i/T_s "
-                f"{fit.ti_over_ts_:.3f}, {fit.factor_:.2f}N cells ({out['grid_density_fit']['seconds']:.0f} s)"
-                + (f"; {fit.note()}" if fit.note() else ""))
-        return {**params, "factor": out["grid_density_fit"]["factor"]}
+            fit = getattr(probes, probe)(*([tuple(sah_scenes)] if sah_scenes else []))
+            out[slot] = {**fit.summary(), "seconds": time.perf_counter() - t0}
+            note = fit.note()
+            log(f"  {say(fit)}, fitted on {', '.join(out[slot]['scenes'])} ({out[slot]['seconds']:.0f} s)"
+                + (f"; {note}" if note else ""))
+        params = {**params, key: out[slot][key]}
     return params
 
 
