@@ -4,8 +4,8 @@ M* = 2 N T_i / T_s, with T_i / T_s measured here instead of the paper's.
 The paper's ratio makes M* = 8N (``gridcost table2``). What a cell step and a triangle test cost is a
 property of the machine and the implementation, not of the method: this tracer tests a cell's
 triangles four at a time in vector lanes (:mod:`tracer.accel.simd_tri`), so a test costs less than
-a step and the best grid has fewer, fuller cells (table2 sweeps find 0.3-1.9N). Bench's
-``grid-fit`` is the grid at this M*:
+a step and the best grid has fewer, fuller cells (``gridcost table2``'s swept best M lies near N
+here). Bench's ``grid-fit`` is the grid at this M*:
 
 * :class:`GridDensityFit` — per ray kind, T/ray = c_setup + c_step steps + c_test tests fitted to
   a grid measured at several densities (:data:`GRID_SETTINGS`: steps and tests move in opposite
