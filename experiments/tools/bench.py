@@ -377,13 +377,14 @@ def _summary(out: dict) -> str:
                       + f"), geometric mean; {fit['seconds']:.0f} s."]
     gfit = out.get("grid_density_fit")
     if gfit:
+        from costmodel.derive import one_level_optimal_M
         how = ("; ".join(f"{k} {gfit[f'{k}_ratio']:.2f} (MAPE {gfit[f'{k}_mape']:.1f} %)"
                          for k in ("random", "camera") if f"{k}_ratio" in gfit) or "no kind separated the two")
         lines += ["", f"grid-fit: the grid with M = 2N T_i/T_s cells (Ize 2007 Eq 4), {gfit['factor']:.2f}N: T_i/T_s fitted "
                       f"in this run on {', '.join(gfit['scenes'])} (the grid at several densities, time per ray against "
                       f"its cell steps and triangle tests per ray kind, c_test / c_step: {how}, geometric mean "
                       f"{gfit['ti_over_ts']:.3f}; the paper's T_i/T_s is {gfit['paper_ti_over_ts']:g}, which gives "
-                      f"{2 * gfit['paper_ti_over_ts']:g}N); {gfit['seconds']:.0f} s"
+                      f"{float(one_level_optimal_M(1.0, 1.0, gfit['paper_ti_over_ts'])):g}N); {gfit['seconds']:.0f} s"
                       + (" (fallback: the timings did not separate a step from a test)" if gfit["fallback"] else "")
                       + (" (clipped to the swept range)" if gfit["clipped"] else "") + "."]
     for k, v in out["unavailable"].items():
