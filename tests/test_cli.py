@@ -206,16 +206,27 @@ def test_advise_json_predicts_and_checks(run_cli, tmp_path):
     checked = [c for c in out["candidates"] if "measured_s" in c]
     assert len(checked) == 3 and all(c["measured_s"] > 0 for c in checked)
     assert (tmp_path / "advise" / "summary.md").exists()
-    # the BVH4's SAH weight: its points (3 meshes x 5 builds x 2 ray kinds) stored with their
-    # provenance, and a second call fits it from them instead of measuring again
-    sah = [r for r in (json.loads(f.read_text()) for f in (tmp_path / "points").glob("*.json"))
-           if isinstance(r["value"], list) and r["value"] and r["value"][0].get("nodes") is not None]
-    assert len(sah) == 1 and len(sah[0]["value"]) == 30 and sah[0]["provenance"]["commit"]
-    assert {p_["scene"] for p_ in sah[0]["value"]} == {"bunny-16k", "dragon-11k", "teapot"}
+    # the BVH4's SAH weight (3 meshes x 5 builds x 2 ray kinds) and the grid's density (3 meshes x 3
+    # densities x 2 ray kinds): their points stored with their provenance, and a second call fits
+    # them from those instead of measuring again
+    fits = sorted((r for r in (json.loads(f.read_text()) for f in (tmp_path / "points").glob("*.json"))
+                   if isinstance(r["value"], list) and r["value"] and r["value"][0].get("nodes") is not None),
+                  key=lambda r: len(r["value"]))
+    assert [len(r["value"]) for r in fits] == [18, 30] and all(r["provenance"]["commit"] for r in fits)
+    for r in fits:
+        assert {p_["scene"] for p_ in r["value"]} == {"bunny-16k", "dragon-11k", "teapot"}
+    assert sorted({p_["params"]["factor"] for p_ in fits[0]["value"]}) == [0.5, 2.0, 8.0]
+    # the grid candidate is probed at the density those points give (Ize Eq 4, or 8N when no kind fitted)
+    from costmodel.griddensity import GridDensityFit
+    dens = GridDensityFit(default=8.0).fit(fits[0]["value"])
+    assert out["candidates"][names.index("grid")]["params"] == {"factor": dens.factor_}
+    assert (f"T_i/T_s {dens.ti_over_ts_:.2f} fitted on this host" if not dens.fallback_ else "paper's") \
+        in out["candidates"][names.index("grid")]["how"]
     again = run_cli("advise", "--quick", "--scene", "dragon-11k", "--rays", "1e6", "--out", str(tmp_path), timeout=600)
     assert again.returncode == 0, again.stderr[-2000:]
-    assert f"C_trav/C_isect {out['candidates'][names.index('bvh4')]['params']['trav_cost']:.2f} (stored points" \
-        in again.stdout + again.stderr
+    log = again.stdout + again.stderr
+    assert f"C_trav/C_isect {out['candidates'][names.index('bvh4')]['params']['trav_cost']:.2f}, fitted on" in log
+    assert log.count("(stored points of this host)") == 2 and f"the grid's cells {dens.factor_:.2f}N" in log
 
 
 def test_trimesh_reference_rays_fit_the_memory_budget(monkeypatch):

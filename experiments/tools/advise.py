@@ -2,7 +2,9 @@
 
     gridcost advise --mesh my.obj --rays 1e7 [--kind random|camera|path] [--check] [--json]
 
-For each candidate — the uniform grid at Ize's M = 8N, the two-level grid at M1 = (8N)^0.6, M2 = 8 N2,
+For each candidate — the uniform grid at Ize's Eq 4, M = 2N T_i/T_s, with T_i/T_s fitted on this host
+(:class:`costmodel.griddensity.GridDensityFit`; the paper's 4, M = 8N, when the fit cannot separate a
+step from a test), the two-level grid at M1 = (8N)^0.6, M2 = 8 N2,
 the kd-tree, the BVH, the 4-wide BVH built with the SAH weight fitted on this host
 (:class:`costmodel.kdcost.BvhSahFit`; probed whenever the BVH is) and, for camera rays, coherent grid
 packets — it predicts the total time for R rays, build plus trace, with an interval, and picks the

@@ -141,7 +141,9 @@ def main(ctx, args) -> int:
         f"end, on {os.cpu_count()} cores (above the core count, other processes take turns with these timings: "
         f"per-ray times of one candidate measured minutes apart — probe and truth — differ by their loads).\n"
         f"\nThe BVH4's SAH weight C_trav/C_isect: {cal['bvh4_trav_cost']:.3g}"
-        + (f" ({cal['bvh4_sah_note']}).\n" if cal.get("bvh4_sah_note") else " (fitted on this host, every ray kind).\n"))
+        + (f" ({cal['bvh4_sah_note']}).\n" if cal.get("bvh4_sah_note") else " (fitted on this host, every ray kind).\n")
+        + f"The grid's cells: {cal['grid_factor']:.3g}N (Ize Eq 4, T_i/T_s {cal['grid_ti_over_ts']:.3g}"
+        + (f"; {cal['grid_density_note']}).\n" if cal.get("grid_density_note") else ", fitted on this host).\n"))
     atomic_write(out_dir / "summary.md", md)
     ctx.write_meta(out_dir, "advise-check", started, threads=threads, rays=n_rays, repeats=repeats,
                    scenes=names, quick=args.quick, load_average=load)
@@ -156,7 +158,7 @@ def main(ctx, args) -> int:
 def _summary(df: pd.DataFrame, cdf: pd.DataFrame, meshes: dict, n_rays: int, repeats: int) -> str:
     lines = ["# advise-check: advise on meshes outside its calibration", "",
              f"Each row: one mesh, one ray kind, one budget R. **pick** = advise's fastest predicted total; "
-             f"**measured best** = the fastest *measured* total over every candidate (grid M = 8N, two-level grid, "
+             f"**measured best** = the fastest *measured* total over every candidate (grid at Ize's Eq 4 with T_i/T_s fitted on this host, two-level grid, "
              f"kd-tree, BVH, the BVH4 with the SAH weight fitted on this host, and coherent grid packets for camera "
              f"rays). Measured total = build (median of "
              f"{repeats} builds after a warm-up, wall clock) + R x per-ray time (median of {repeats} interleaved "

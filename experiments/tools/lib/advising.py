@@ -32,13 +32,18 @@ PROBE_BUILD_MAX_S = 2.0
 #: loaded machine hands out, so one preemption does not make a sample (camera rays: 20,000 rays
 #: can take 4 ms)
 MIN_SAMPLE_S = 0.05
-#: the BVH4 candidate's SAH weight is fitted on costmodel.kdcost.BVH_CALIBRATION; --quick: the same
-#: three meshes with fewer rays (two tiny scenes fitted well too, but three meshes leave more margin
-#: against a term coming out free on a loaded machine), each timed sample MIN_SAMPLE_S long (with
-#: 0.02 s samples a noisy cloud VM left both terms' split free: costmodel.kdcost.BvhSahFit)
-BVH_SAH_QUICK = {"n_rays": 10_000, "repeats": 3, "min_sample": MIN_SAMPLE_S}
-#: the files beside tracer/ that shape those points (their measurement key)
-BVH_SAH_CODE = ("costmodel/kdcost.py",)
+#: what advise fits on this host before it probes, from points measured by the first call (a few
+#: seconds) and stored like every point: the BVH4 candidate's SAH weight
+#: (:class:`costmodel.kdcost.BvhSahFit`) and the uniform grid candidate's cells per triangle, Ize's
+#: Eq 4 with this host's T_i/T_s (:class:`costmodel.griddensity.GridDensityFit`: a step and a test
+#: cost what this machine and this tracer make them cost, not the paper's 4:1). structure ->
+#: (point-store target, the files beside tracer/ that shape the points: their measurement key)
+HOST_FITS = {"bvh": ("advise-bvh-sah", ("costmodel/kdcost.py",)),
+             "grid": ("advise-grid-density", ("costmodel/griddensity.py", "costmodel/kdcost.py"))}
+#: --quick: the same meshes with fewer rays (two tiny scenes fitted well too, but three meshes leave
+#: more margin against a term coming out free on a loaded machine), each timed sample MIN_SAMPLE_S
+#: long (with 0.02 s samples a noisy cloud VM left both terms' split free: costmodel.kdcost.BvhSahFit)
+HOST_FIT_QUICK = {"n_rays": 10_000, "repeats": 3, "min_sample": MIN_SAMPLE_S}
 #: rays per packet of the coherent grid (8x8 tiles of camera rays)
 PACKET = 64
 #: disjoint probe sets of PROBE_RAYS each, traced in turn (:func:`probe_pool`)
@@ -46,9 +51,10 @@ PROBE_SETS = 10
 
 
 def calibration(ctx, log) -> dict:
-    """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)}, and
-    ``bvh4_trav_cost``: the 4-wide BVH's SAH weight fitted on this host (its points measured by the
-    first call, 4 s, and stored: :func:`bvh_sah_points`)."""
+    """kind -> {hier: (fitted estimator, (lo, hi) relative error quantiles of T_BH and t_RH)};
+    ``bvh4_trav_cost``, the 4-wide BVH's SAH weight, and ``grid_factor``, the uniform grid's cells
+    per triangle (with ``grid_ti_over_ts``), both fitted on this host (:data:`HOST_FITS`), and their
+    notes (what a fit left out, a fallback)."""
     from costmodel.select import GridcostEstimator, loo_errors, records
     from experiments.hapala.lib.calibrate import measure_all
     names, cfg = (QUICK_CALIBRATION, QUICK_CAL_CFG) if ctx.quick else (CALIBRATION, CAL_CFG)
@@ -57,16 +63,27 @@ def calibration(ctx, log) -> dict:
     if time.time() - t0 > 5:
         log(f"advise: calibrated this host on {len(names)} small scenes in {time.time() - t0:.0f} s "
             f"(stored: later calls reuse it)")
-    from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS, fit_bvh_trav_cost
-    t0 = time.time()
-    key = {"target": "advise-bvh-sah", "scenes": list(BVH_CALIBRATION), "settings": list(BVH_SETTINGS),
-           "quick": bool(ctx.quick), **(BVH_SAH_QUICK if ctx.quick else {})}
-    pts, cached = ctx.store(code=BVH_SAH_CODE).measure(key, bvh_sah_points, bool(ctx.quick))
-    sah = fit_bvh_trav_cost(pts)
-    out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah_note": sah.note()}
-    log(f"advise: the BVH4's SAH weight fitted on {', '.join(sah.summary()['scenes'])}: C_trav/C_isect "
-        f"{sah.trav_cost_:.2f} ({'stored points of this host' if cached else f'measured in {time.time() - t0:.0f} s, stored'})"
+    from costmodel.griddensity import GridDensityFit
+    from costmodel.kdcost import fit_bvh_trav_cost
+    from tracer.accel.constants import IZE_M_FACTOR
+    pts, how = {}, {}
+    for structure, (target, code) in HOST_FITS.items():
+        t0 = time.time()
+        scenes, settings = host_fit_inputs(structure)
+        key = {"target": target, "scenes": list(scenes), "settings": list(settings),
+               "quick": bool(ctx.quick), **(HOST_FIT_QUICK if ctx.quick else {})}
+        pts[structure], cached = ctx.store(code=code).measure(key, host_fit_points, structure, bool(ctx.quick))
+        how[structure] = (f"on {', '.join(scenes)} "
+                          + ("(stored points of this host)" if cached else f"(measured in {time.time() - t0:.0f} s, stored)"))
+    sah = fit_bvh_trav_cost(pts["bvh"])
+    # no ray kind separating a step from a test: the paper's 8N, what advise probed before this fit
+    dens = GridDensityFit(default=IZE_M_FACTOR).fit(pts["grid"])
+    out = {"bvh4_trav_cost": sah.trav_cost_, "bvh4_sah_note": sah.note(), "grid_factor": dens.factor_,
+           "grid_ti_over_ts": dens.ti_over_ts_, "grid_fallback": dens.fallback_, "grid_density_note": dens.note()}
+    log(f"advise: the BVH4's SAH weight C_trav/C_isect {sah.trav_cost_:.2f}, fitted {how['bvh']}"
         + (f"; {sah.note()}" if sah.free_ else ""))
+    log(f"advise: the grid's cells {dens.factor_:.2f}N (Ize Eq 4, T_i/T_s {dens.ti_over_ts_:.2f}), fitted {how['grid']}"
+        + (f"; {dens.note()}" if dens.note() else ""))
     for kind in ("random", "path"):
         out[kind] = {}
         for hier in cfg["hiers"]:
@@ -81,14 +98,19 @@ def calibration(ctx, log) -> dict:
     return out
 
 
-def bvh_sah_points(quick: bool) -> list[dict]:
-    """The binary BVH's points of :func:`costmodel.kdcost.fit_bvh_trav_cost` on its calibration
-    meshes (fewer rays with ``quick``): measured once per host and code, stored like every point
-    (:func:`calibration`)."""
+def host_fit_inputs(structure: str) -> tuple:
+    """(calibration meshes, build settings) of the :data:`HOST_FITS` fit of ``structure``."""
+    from costmodel.griddensity import GRID_CALIBRATION, GRID_SETTINGS
     from costmodel.kdcost import BVH_CALIBRATION, BVH_SETTINGS
+    return {"bvh": (BVH_CALIBRATION, BVH_SETTINGS), "grid": (GRID_CALIBRATION, GRID_SETTINGS)}[structure]
+
+
+def host_fit_points(structure: str, quick: bool) -> list[dict]:
+    """The points of ``structure``'s :data:`HOST_FITS` fit (fewer rays with ``quick``): measured once
+    per host and code, stored like every point (:func:`calibration`)."""
     from experiments.core.probes import measure_kd_points
-    return measure_kd_points(BVH_CALIBRATION, settings=BVH_SETTINGS, structure="bvh",
-                             **(BVH_SAH_QUICK if quick else {}))
+    scenes, settings = host_fit_inputs(structure)
+    return measure_kd_points(scenes, settings=settings, structure=structure, **(HOST_FIT_QUICK if quick else {}))
 
 
 def probe_pool(scene, kind: str, seed: int, image: int | None = None) -> list:
@@ -131,7 +153,11 @@ def predict(scene, kind, cal, seed, log=lambda *a: None, min_sample: float = MIN
     from tracer.accel import plugin_structures
     pool = probe_pool(scene, kind, seed, image)
     rays = pool[0]
-    probed = [("grid", {"factor": 8.0}, "probed (M = 8N, Ize Eq 4, Ti/Ts = 4)"),
+    f = cal["grid_factor"]
+    grid_how = (f"probed (M = {f:.2f}N, Ize Eq 4 with T_i/T_s {cal['grid_ti_over_ts']:.2f} fitted on this host)"
+                if not cal["grid_fallback"] else
+                f"probed (M = {f:g}N, Ize Eq 4 with the paper's T_i/T_s: {cal['grid_density_note']})")
+    probed = [("grid", {"factor": f}, grid_how),
               ("nested", {"levels": 2}, "probed (M1 = (8N)^0.6, M2 = 8 N2, Ize Eq 12-13)")]
     if kind == "camera":
         probed.append(("cgt", {}, "probed (Wald 2006, lambda = 5, 8x8 packets)"))
