@@ -227,14 +227,15 @@ def test_sweep_times_points_beside_a_reference(tmp_path, one_numba_thread):
     # 7 interleaved rounds: with 3, a burst of load on a shared machine once moved the median ratio to
     # 0.43; with 7, a benchmark running beside the test suite on 2 cores moved it to 0.61, and the
     # other xdist worker once to 2.08 (alone: 1.00). The bounds check the pairing (the reference
-    # against itself, not against another grid: the one-cell grid below is ~55x), not this machine's
-    # timing noise, which a unit test must not depend on.
+    # against itself, not against another grid: the one-cell grid below is 14x on an AMD EPYC host
+    # without AVX-512 and ~55x on others), not this machine's timing noise or its SIMD width, which
+    # a unit test must not depend on.
     from experiments.core.sweep import REFERENCE, sweep
     rows = sweep(scene, "grid", [{"cells": REFERENCE[1]["factor"] * scene.n}, {"cells": 1.0}], rays, store, 7)
     more = sweep(scene, "grid", [{"cells": 2.0 * scene.n}], rays, RunContext(out=tmp_path).store(), 3)
     ref, one = rows
     assert 0.25 < ref["ratio_to_ref"] < 4.0
-    assert one["ratio_to_ref"] > 16  # one cell: every ray tests every triangle
+    assert one["ratio_to_ref"] > 6  # one cell: every ray tests every triangle
     anchor = ref["anchored_seconds"] / ref["ratio_to_ref"]
     assert one["anchored_seconds"] == pytest.approx(one["ratio_to_ref"] * anchor)
     assert one["anchored_ns_per_ray"] == pytest.approx(one["anchored_seconds"] / 3000 * 1e9)

@@ -84,7 +84,9 @@ def test_counters(bunny):
     plain, mb, fc = pc["tests_plain"].sum(), pc["tests_mb"].sum(), pc["tests_mb_fc"].sum()
     assert plain > 1.2 * mb > 0, (plain, mb)
     assert mb > 1.2 * fc > 0, (mb, fc)
-    assert fc <= pc["tests"].sum() < mb  # both on (culling pauses while a packet is down to one vector of rays)
+    # both on: the group frusta then test a triangle on the groups of 8 rays it may meet only
+    # (culling pauses while a packet is down to one vector of rays)
+    assert pc["tests"].sum() < fc, (pc["tests"].sum(), fc)
     cnt = pc["counters"]
     assert cnt["tests"].sum() == pc["tests"].sum()
     assert cnt["steps"].sum() == pc["cells"].sum()
@@ -102,6 +104,9 @@ def test_counters(bunny):
     pc8 = CoherentGrid(packet=8, macro=6).build(bunny).packet_counters(r8.origins, r8.directions)
     cells1, cells4, cells8 = sc["steps"].mean(), pc["cells"].sum() / r.n, pc8["cells"].sum() / r.n
     assert cells8 < cells4 < cells1, (cells1, cells4, cells8)
+    # 8 x 8 packets: a small triangle meets one or two rows of the tile, so the group frusta leave
+    # well under the packet culling's tests (bunny-948: 27,545 against 53,584)
+    assert pc8["tests"].sum() < 0.7 * pc8["tests_mb_fc"].sum()
 
 
 def test_random_rays_fall_back(bunny):

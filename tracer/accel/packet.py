@@ -18,12 +18,16 @@ packets, each thread with its own work arrays):
    the cell table); per-packet mailboxing (triangles stamped with the packet id, Sec 2.3) and
    frustum culling: a triangle is rejected when its vertices lie outside one of the four frustum
    planes or, with a common origin, when the four corner rays miss it on one edge (Dmitriev's shaft
-   culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays). Both tests keep a
-   margin far above rounding, so culling never drops a hit.
-4. Ray-triangle tests: a branch-free loop over the packet's rays that LLVM vectorises (masked
-   stores), computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle`
-   (only ray-independent ones hoisted), so hits agree bit for bit with the oracle. All inputs are
-   widened with ``np.float64(...)``: Numba's ``float()`` keeps a float32 a float32.
+   culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays). Then the group
+   frusta: the packet's slots form groups of LANES rays (a row of the tile until retired rays are
+   replaced), each with its own frustum bounds, and a triangle is tested only on the range of groups
+   whose frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8
+   packet). Every test keeps a margin far above rounding, so culling never drops a hit.
+4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
+   computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
+   order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the
+   oracle. All inputs are widened with ``np.float64(...)``: Numba's ``float()`` keeps a float32 a
+   float32.
 5. Termination: each ray needs slices up to its closest hit's (or its exit's); rays that need no
    more are retired (their result written, the last active ray moved into their slot) and the
    frustum shrinks to the rest; the packet ends when none is left. Any-hit queries (``occluded``,
@@ -36,8 +40,9 @@ Counters: per ray (:data:`tracer.accel.COUNTER_NAMES`) packet-level counts (set-
 slices = nodes, mailbox + culling skips) are spread evenly over the packet's rays (sums are exact);
 ``tests`` are the ray-triangle tests each ray took part in. :meth:`CoherentGrid.packet_counters`
 returns per-packet arrays (:data:`PACKET_COUNTERS`), among them the tests without mailboxing, with
-mailboxing and with mailboxing + culling, all from one traversal (hits, and so the traversal, do
-not depend on either technique).
+mailboxing and with mailboxing + culling of the whole packet, all from one traversal (hits, and so
+the traversal, do not depend on either technique), and the tests the variant did (with culling on,
+fewer: the group frusta).
 
 Files: this module has the packet loop (:func:`_packets`), the batched kernel and the structure;
 the loop's building blocks (work-array rows, the SIMD triangle test of step 4, the frustum and the
@@ -61,14 +66,15 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, _bounds, _cells, _compact, _culled, _max, _min, _needs, _retire,
-    _span, _spread, _test_tri,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, LANES, _cells, _compact, _culled, _frustum, _groups, _max,
+    _min, _needs, _retire, _span, _spread, _test_tri,
 )
 
 NCOUNT = len(COUNTER_NAMES)
 #: per-packet counter columns of :meth:`CoherentGrid.packet_counters`; tests_* are ray-triangle
-#: tests (triangles x rays of the packet): no mailboxing/culling, mailboxing, mailboxing + culling,
-#: and what the configured variant did; test_lanes the SIMD lanes those tests occupied (the ray
+#: tests (triangles x rays of the packet): no mailboxing/culling, mailboxing, mailboxing + culling
+#: of the whole packet, and what the configured variant did (with culling: only the groups of
+#: LANES rays the group frusta leave); test_lanes the SIMD lanes those tests occupied (the ray
 #: loop runs over whole vectors of LANES rays, so a 1-ray packet pays for LANES); packet_rays the
 #: rays traced as a packet (the rest of the rays meeting the grid are in ``single``)
 PACKET_COUNTERS = ("rays", "single", "slices", "cells", "considered", "tests_plain", "tests_mb",
@@ -84,8 +90,6 @@ MAX_WIDTH = 64.0
 CULL_MIN_RAYS = 8
 #: packets per parallel work item
 CHUNK = 16
-#: the ray loop of a triangle test runs over a multiple of this many rays (SIMD width in doubles)
-LANES = 8
 
 
 # ---------------------------------------------------------------- the packet loop
@@ -97,6 +101,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
     is the rays [p k2, (p + 1) k2); rays that cannot join it are traced on their own."""
     m = O.shape[0]
     nxg, nyg, nzg = res[0], res[1], res[2]
+    GB = W[_GB:_GB + 8]  # the group frusta (tracer.accel.packet_kernels._frustum)
     for p in range(p0, p1):
         b = p * k2
         e = min(m, b + k2)
@@ -163,6 +168,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 W[_BEST, n] = np.float64(tmax[i])
                 I[_BID, n] = -1
                 I[_IDX, n] = i
+                I[_NT, n] = 0
                 W[_T1, n] = t1
                 gok = (o3[K] - gp[K]) * gp[6 + K]
                 kin = gok + t0 * gdk
@@ -176,7 +182,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
             else:
                 I[_SINGLE, ns] = i
                 ns += 1
-        slices = cells = considered = uniq = tested = skips = mskips = culled = 0
+        slices = cells = considered = uniq = skips = mskips = culled = 0
         acc_plain = acc_mb = acc_fc = acc_tests = acc_lanes = 0  # ray-triangle tests: no MB, MB, MB + FC, done
         n_in = n
         if n > 0:
@@ -202,7 +208,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 I[_NL, q] = min(int(math.floor(W[_KO, q] + W[_T1, q] * W[_KD, q] + EPS)), nmax)  # last slice it needs
                 if W[_OX, q] != W[_OX, 0] or W[_OY, q] != W[_OY, 0] or W[_OZ, q] != W[_OZ, 0]:
                     common = False
-            fr = _bounds(n, W)
+            fr = _frustum(n, W, GB)
             if (fr[3] - fr[2] > MAX_SPREAD or fr[7] - fr[6] > MAX_SPREAD
                     or fr[1] - fr[0] > MAX_WIDTH or fr[5] - fr[4] > MAX_WIDTH):
                 for q in range(n):  # not a coherent packet: every ray on its own
@@ -282,21 +288,30 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                                     skips += 1
                                     culled += 1
                                     continue
-                            tested += 1
-                            acc_tests += n
-                            acc_lanes += (n + LANES - 1) & -LANES
-                            # all lanes of the last vector: slots past n hold retired or unused rays,
-                            # whose results are never read (LLVM's scalar remainder loop is slow)
-                            nh = _test_tri((n + LANES - 1) & -LANES, common, W, I, tid,
-                                           ax, ay, az, bx, by, bz, cx, cy, cz, tmin)
+                            # whole vectors of LANES rays (slots past n hold retired or unused rays, whose
+                            # results are never read); with culling, only the groups whose frusta it may meet
+                            if cull_now and n > LANES:
+                                lo, hi = _groups(n, GB, ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
+                                if lo == hi:
+                                    skips += 1
+                                    culled += 1
+                                    continue
+                            else:
+                                lo, hi = 0, (n + LANES - 1) & -LANES
+                            nh = _test_tri(lo, hi, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin)
+                            acc_lanes += hi - lo
+                            acc_tests += min(n, hi) - lo
+                            if counters is not None:
+                                for q in range(lo, min(n, hi)):
+                                    I[_NT, q] += 1
                             changed = True
                             if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
                                 _needs(n, True, W, I)
-                                n, retired = _compact(n, -1, W, I, out_t, out_id, counters, tested)
+                                n, retired = _compact(n, -1, W, I, out_t, out_id, counters)
                                 if n == 0:
                                     break
                                 if retired:
-                                    fr = _bounds(n, W)
+                                    fr = _frustum(n, W, GB)
                                     if edge:
                                         ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
                                     nlast, nfirst = _span(n, I)
@@ -312,17 +327,17 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 # ---- retire rays that need no further slice (checked when a hit came or the earliest
                 # last slice is reached); the frustum shrinks to the rest
                 if changed or s >= nfirst:
-                    n, retired = _compact(n, s, W, I, out_t, out_id, counters, tested)
+                    n, retired = _compact(n, s, W, I, out_t, out_id, counters)
                     if n == 0:
                         break
                     if retired:
-                        fr = _bounds(n, W)
+                        fr = _frustum(n, W, GB)
                         if edge:
                             ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
                     nlast, nfirst = _span(n, I)
                 s += 1
             for q in range(n):
-                _retire(q, I[_IDX, q], W, I, out_t, out_id, counters, tested)
+                _retire(q, I[_IDX, q], W, I, out_t, out_id, counters)
         # ---- single-ray fallback: the uniform grid's own kernel
         s_steps = 0
         s_tests = 0
@@ -413,8 +428,8 @@ class CoherentGrid(Accel):
         out_t = np.empty(m, np.float32)
         out_id = np.empty(m, np.int32)
         width = (k2 + LANES - 1) // LANES * LANES
-        W = np.zeros((nthr, _NW, width), np.float64)
-        I = np.zeros((nthr, 4, width), np.int32)
+        W = np.zeros((nthr, _GB + 8, width), np.float64)  # rows _GB.. hold the group frusta
+        I = np.zeros((nthr, _NI, width), np.int32)
         stamps = np.full((nthr, max(self.n_, 1)), -1, np.int32)
         cgt_trace(o, d, tmin, tmax, anyhit, k2, self.gp_, self.res_, self.cell_start_, self.occupied_, self.tri_ids_,
                   self.tri_verts_, self.macro_, max(self.macro, 1), self.mailbox, self.frustum_cull,

@@ -1,13 +1,18 @@
 """Building blocks of the coherent grid traversal's packet loop (:func:`tracer.accel.packet._packets`,
 see :mod:`tracer.accel.packet` for the algorithm): the per-thread work-array layout, the branch-free
-ray-packet/triangle test LLVM vectorises, the frustum (bounds, cell ranges, which rays still need
-slices) and frustum culling (planes, then corner rays against the triangle's edges).
+ray-packet/triangle test LLVM vectorises, the frustum (bounds of the packet and of each group of
+LANES slots, cell ranges, which rays still need slices) and frustum culling (planes, then corner
+rays against the triangle's edges; then the groups' own frusta).
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from tracer.accel._jit import jit, ray_jit
 from tracer.accel.geometry import INF, PARALLEL_COS
@@ -22,30 +27,102 @@ _PAR2 = PARALLEL_COS * PARALLEL_COS
 # rows of the per-thread float work array
 _OX, _OY, _OZ, _DX, _DY, _DZ, _DD, _BEST, _T1, _KO, _KD, _AU, _AV, _SU, _SV, _C0, _C1 = range(17)
 _NW = 17
-# rows of the per-thread int work array
-_BID, _IDX, _SINGLE, _NL = range(4)
+# rows of the per-thread int work array (_NT: the ray-triangle tests the slot's ray took part in)
+_BID, _IDX, _SINGLE, _NL, _NT = range(5)
+#: first row of the group frusta (8 rows: :func:`_frustum`) in the float work array
+_GB = _NW
+_NI = 5
+#: the ray loop of a triangle test runs over a multiple of this many rays (SIMD width in doubles);
+#: the group frusta (:func:`_frustum`) bound groups of this many slots, one vector each
+LANES = 8
+
+
+def _tri8_codegen(common):
+    """Codegen of :func:`_tri8c` (``common``: one origin, s = a - o and s.n given) or :func:`_tri8o`
+    (each lane's own origin): the rays in slots [lo, lo + LANES) of the work arrays against one
+    triangle on ``<LANES x double>`` LLVM vectors, ray_triangle's float64 expressions in its order
+    without branches (no fast-math or ``contract`` flags, so no fused multiply-add: a hit lane's t is
+    bit-identical to ray_triangle's); its early returns become lane masks with the scalar
+    comparisons' NaN rule (ordered compares). Hit lanes get t in W[_BEST] and the triangle id in
+    I[_BID] (a blend: the other lanes keep theirs); returns the number of hit lanes."""
+    vd = ir.VectorType(ir.DoubleType(), LANES)
+    vi = ir.VectorType(ir.IntType(32), LANES)
+    i32 = ir.IntType(32)
+
+    def codegen(context, builder, signature, args):
+        b = builder
+        aW, aI, alo, atri, atid = args
+        W = context.make_array(signature.args[0])(context, b, aW)
+        I = context.make_array(signature.args[1])(context, b, aI)
+
+        def row(arr, r, vt):  # arr[r, lo:lo + LANES] as a pointer to a vector
+            p = cgutils.get_item_pointer2(context, b, arr.data, cgutils.unpack_tuple(b, arr.shape),
+                                          cgutils.unpack_tuple(b, arr.strides), "C",
+                                          [ir.Constant(alo.type, r), alo])
+            return b.bitcast(p, vt.as_pointer())
+
+        def splat(x, vt=vd):
+            v = b.insert_element(ir.Constant(vt, ir.Undefined), x, i32(0))
+            return b.shuffle_vector(v, ir.Constant(vt, ir.Undefined), ir.Constant(vi, [0] * LANES))
+
+        mul, sub, add, cmp = b.fmul, b.fsub, b.fadd, b.fcmp_ordered
+        ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin = (
+            splat(b.extract_value(atri, k)) for k in range(14))
+        dx, dy, dz, dd = (b.load(row(W, r, vd), align=8) for r in (_DX, _DY, _DZ, _DD))
+        pbest = row(W, _BEST, vd)
+        best = b.load(pbest, align=8)
+        if common:  # the first three are s = a - o, the 15th s.n
+            sx, sy, sz = ax, ay, az
+            sn = splat(b.extract_value(atri, 14))
+        else:
+            sx, sy, sz = (sub(a, b.load(row(W, r, vd), align=8)) for a, r in ((ax, _OX), (ay, _OY), (az, _OZ)))
+            sn = add(add(mul(sx, nx), mul(sy, ny)), mul(sz, nz))
+        det = add(add(mul(dx, nx), mul(dy, ny)), mul(dz, nz))
+        rx = sub(mul(dy, sz), mul(dz, sy))
+        ry = sub(mul(dz, sx), mul(dx, sz))
+        rz = sub(mul(dx, sy), mul(dy, sx))
+        un = b.fneg(add(add(mul(e2x, rx), mul(e2y, ry)), mul(e2z, rz)))
+        vn = add(add(mul(e1x, rx), mul(e1y, ry)), mul(e1z, rz))
+        t = b.fdiv(sn, det)
+        zero = ir.Constant(vd, [0.0] * LANES)
+        uv = add(un, vn)
+        pos = b.and_(b.and_(b.and_(cmp(">", det, zero), cmp(">=", un, zero)), cmp(">=", vn, zero)), cmp("<=", uv, det))
+        neg = b.and_(b.and_(b.and_(cmp("<=", det, zero), cmp("<=", un, zero)), cmp("<=", vn, zero)), cmp(">=", uv, det))
+        hit = b.and_(b.and_(b.and_(cmp(">", mul(det, det), mul(p2nn, dd)), b.or_(pos, neg)), cmp(">", t, tmin)),
+                     cmp("<", t, best))
+        b.store(b.select(hit, t, best), pbest, align=8)
+        pid = row(I, _BID, vi)
+        b.store(b.select(hit, splat(atid, vi), b.load(pid, align=4)), pid, align=4)
+        m = b.bitcast(hit, ir.IntType(LANES))
+        cnt = b.call(b.module.declare_intrinsic("llvm.ctpop", [ir.IntType(LANES)]), [m])
+        return b.zext(cnt, ir.IntType(64))
+
+    return codegen
+
+
+@intrinsic
+def _tri8c(typingctx, W, I, lo, tri, tid):
+    """``_tri8c(W, I, lo, tri, tid)``: rays with a common origin in slots [lo, lo + LANES) against one
+    triangle; ``tri`` = (s, e1, e2, n, p2nn, tmin, s.n) as 15 float64 (s = a - o; p2nn =
+    PARALLEL_COS^2 n.n); ``tid`` int32."""
+    return types.int64(W, I, lo, tri, tid), _tri8_codegen(True)
+
+
+@intrinsic
+def _tri8o(typingctx, W, I, lo, tri, tid):
+    """``_tri8o(W, I, lo, tri, tid)``: as :func:`_tri8c`, each ray with its own origin;
+    ``tri`` = (a, e1, e2, n, p2nn, tmin) as 14 float64."""
+    return types.int64(W, I, lo, tri, tid), _tri8_codegen(False)
 
 
 @ray_jit
-def _lane(dx, dy, dz, dd, sx, sy, sz, sn, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, best):
-    """One ray of a packet test: ray_triangle's float64 expressions without branches -> (hit, t)."""
-    det = dx * nx + dy * ny + dz * nz
-    rx = dy * sz - dz * sy
-    ry = dz * sx - dx * sz
-    rz = dx * sy - dy * sx
-    un = -(e2x * rx + e2y * ry + e2z * rz)
-    vn = e1x * rx + e1y * ry + e1z * rz
-    t = sn / det
-    ok = (((det > 0.0) & (un >= 0.0) & (vn >= 0.0) & (un + vn <= det))
-          | ((det <= 0.0) & (un <= 0.0) & (vn <= 0.0) & (un + vn >= det)))
-    return (det * det > p2nn * dd) & ok & (t > tmin) & (t < best), t
-
-
-@ray_jit
-def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
-    """Rays [0, n) of the packet against one triangle (float64 vertices): a loop LLVM vectorises,
-    with masked stores of the hits. With a common origin s = a - o and s.n are hoisted. Returns
-    how many of the n lanes hit (the any-hit kernel retires those rays at once)."""
+def _test_tri(lo, hi, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
+    """Rays [lo, hi) of the packet (whole vectors of LANES) against one triangle (float64 vertices),
+    LANES at a time (:func:`_tri8c`, :func:`_tri8o`), the ray-independent terms hoisted (with a
+    common origin also s = a - o and s.n). Returns how many lanes hit (the any-hit kernel retires
+    those rays at once). Why explicit vectors: LLVM vectorises a plain loop over the lanes only
+    when it runs over a whole packet, not over the few groups the group frusta leave (it unrolled
+    or kept those scalar: 5-8 ns per lane instead of 3)."""
     e1x = bx - ax
     e1y = by - ay
     e1z = bz - az
@@ -57,29 +134,18 @@ def _test_tri(n, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
     nz = e1x * e2y - e1y * e2x
     p2nn = _PAR2 * (nx * nx + ny * ny + nz * nz)
     nh = 0
+    tid = np.int32(tid)
     if common:
         sx = ax - W[_OX, 0]
         sy = ay - W[_OY, 0]
         sz = az - W[_OZ, 0]
-        sn = sx * nx + sy * ny + sz * nz
-        for i in range(n):
-            h, t = _lane(W[_DX, i], W[_DY, i], W[_DZ, i], W[_DD, i], sx, sy, sz, sn,
-                         e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, W[_BEST, i])
-            nh += h
-            if h:
-                W[_BEST, i] = t
-                I[_BID, i] = tid
+        tri = (sx, sy, sz, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, sx * nx + sy * ny + sz * nz)
+        for i in range(lo, hi, LANES):
+            nh += _tri8c(W, I, i, tri, tid)
     else:
-        for i in range(n):
-            sx = ax - W[_OX, i]
-            sy = ay - W[_OY, i]
-            sz = az - W[_OZ, i]
-            h, t = _lane(W[_DX, i], W[_DY, i], W[_DZ, i], W[_DD, i], sx, sy, sz, sx * nx + sy * ny + sz * nz,
-                         e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, W[_BEST, i])
-            nh += h
-            if h:
-                W[_BEST, i] = t
-                I[_BID, i] = tid
+        tri = (ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin)
+        for i in range(lo, hi, LANES):
+            nh += _tri8o(W, I, i, tri, tid)
     return nh
 
 
@@ -125,16 +191,71 @@ def _spread(counters, n, col, v, I):
 
 
 @jit
-def _bounds(n, W):
-    """The frustum of rays [0, n): u in [alo_u + slo_u k', ahi_u + shi_u k'], same for v."""
+def _frustum(n, W, GB):
+    """The frustum of rays [0, n): u in [alo_u + slo_u k', ahi_u + shi_u k'], same for v; and the
+    same eight bounds of each group of LANES slots in GB[:, g] (rows in that order)."""
+    for g in range((n + LANES - 1) // LANES):
+        alo_u = slo_u = alo_v = slo_v = INF
+        ahi_u = shi_u = ahi_v = shi_v = -INF
+        for q in range(g * LANES, min(n, g * LANES + LANES)):
+            alo_u = min(alo_u, W[_AU, q]); ahi_u = max(ahi_u, W[_AU, q])
+            alo_v = min(alo_v, W[_AV, q]); ahi_v = max(ahi_v, W[_AV, q])
+            slo_u = min(slo_u, W[_SU, q]); shi_u = max(shi_u, W[_SU, q])
+            slo_v = min(slo_v, W[_SV, q]); shi_v = max(shi_v, W[_SV, q])
+        GB[0, g] = alo_u; GB[1, g] = ahi_u; GB[2, g] = slo_u; GB[3, g] = shi_u
+        GB[4, g] = alo_v; GB[5, g] = ahi_v; GB[6, g] = slo_v; GB[7, g] = shi_v
     alo_u = slo_u = alo_v = slo_v = INF
     ahi_u = shi_u = ahi_v = shi_v = -INF
-    for q in range(n):
-        alo_u = min(alo_u, W[_AU, q]); ahi_u = max(ahi_u, W[_AU, q])
-        alo_v = min(alo_v, W[_AV, q]); ahi_v = max(ahi_v, W[_AV, q])
-        slo_u = min(slo_u, W[_SU, q]); shi_u = max(shi_u, W[_SU, q])
-        slo_v = min(slo_v, W[_SV, q]); shi_v = max(shi_v, W[_SV, q])
+    for g in range((n + LANES - 1) // LANES):
+        alo_u = min(alo_u, GB[0, g]); ahi_u = max(ahi_u, GB[1, g])
+        slo_u = min(slo_u, GB[2, g]); shi_u = max(shi_u, GB[3, g])
+        alo_v = min(alo_v, GB[4, g]); ahi_v = max(ahi_v, GB[5, g])
+        slo_v = min(slo_v, GB[6, g]); shi_v = max(shi_v, GB[7, g])
     return alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v
+
+
+@ray_jit
+def _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
+    """The triangle's vertices in the packet's grid frame: k' (slices from the entry plane P0 along
+    the major axis K, in the packet's direction) and u, v (cells along U, V) of each vertex."""
+    va, vb, vc = (ax, ay, az), (bx, by, bz), (cx, cy, cz)
+    return (sig * ((va[K] - gp[K]) * gp[6 + K] - P0), sig * ((vb[K] - gp[K]) * gp[6 + K] - P0),
+            sig * ((vc[K] - gp[K]) * gp[6 + K] - P0),
+            (va[U] - gp[U]) * gp[6 + U], (vb[U] - gp[U]) * gp[6 + U], (vc[U] - gp[U]) * gp[6 + U],
+            (va[V] - gp[V]) * gp[6 + V], (vb[V] - gp[V]) * gp[6 + V], (vc[V] - gp[V]) * gp[6 + V])
+
+
+@ray_jit
+def _side(lo, hi, alo, ahi, slo, shi, k0, k1):
+    """Does the box [lo, hi] x [k0, k1] (u, k') lie beyond the lower frustum plane u = alo + slo k'
+    or the upper one u = ahi + shi k' of a group (EPS margin)? Then so does every vertex: the plane
+    test of :func:`_plane_cull`."""
+    return (hi - (alo + _min(slo * k0, slo * k1)) < -EPS) | (lo - (ahi + _max(shi * k0, shi * k1)) > EPS)
+
+
+@ray_jit
+def _groups(n, GB, ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
+    """The lanes [lo, hi) of rays [0, n) the triangle may meet, whole groups of LANES slots: from the
+    first to the last group whose frustum the triangle's grid-space box (u, v against k') does not
+    lie outside (lo = hi: none). The box test implies the per-vertex plane test of
+    :func:`_plane_cull` on the group's bounds, whose margins already keep every hit. One range, not
+    a list of groups: the ray loop of :func:`_test_tri` vectorises only over a range (a group in
+    between that the triangle misses is tested anyway; a packet's groups are rows of its tile, so
+    the groups a small triangle meets are mostly adjacent)."""
+    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
+    kl = min(k0, k1, k2); kh = max(k0, k1, k2)
+    ul = min(gu0, gu1, gu2); uh = max(gu0, gu1, gu2)
+    vl = min(gv0, gv1, gv2); vh = max(gv0, gv1, gv2)
+    first = 1 << 30
+    last = -1
+    for g in range((n + LANES - 1) // LANES):
+        if not (_side(ul, uh, GB[0, g], GB[1, g], GB[2, g], GB[3, g], kl, kh)
+                or _side(vl, vh, GB[4, g], GB[5, g], GB[6, g], GB[7, g], kl, kh)):
+            first = min(first, g)
+            last = g
+    if last < 0:
+        return 0, 0
+    return first * LANES, last * LANES + LANES
 
 
 @ray_jit
@@ -149,13 +270,13 @@ def _span(n, I):
 
 
 @ray_jit
-def _retire(q, i, W, I, out_t, out_id, counters, tested):
-    """Packet slot q (ray i) is done: write its hit, if any, and the packet's triangle tests."""
+def _retire(q, i, W, I, out_t, out_id, counters):
+    """Packet slot q (ray i) is done: write its hit, if any, and the triangle tests it took part in."""
     if I[_BID, q] >= 0:
         out_t[i] = np.float32(W[_BEST, q])
         out_id[i] = I[_BID, q]
     if counters is not None:
-        counters[i, 2] = tested
+        counters[i, 2] = I[_NT, q]
 
 
 @ray_jit
@@ -168,7 +289,7 @@ def _needs(n, anyhit, W, I):
 
 
 @ray_jit
-def _compact(n, s, W, I, out_t, out_id, counters, tested):
+def _compact(n, s, W, I, out_t, out_id, counters):
     """Retire the rays of slots [0, n) that need no slice past ``s`` (I[_NL] <= s): write their
     results, move the last active ray into each freed slot (the retired ray's id stays at the end of
     I[_IDX] for the counters). Returns (rays left, whether any was retired)."""
@@ -180,7 +301,7 @@ def _compact(n, s, W, I, out_t, out_id, counters, tested):
             continue
         retired = True
         i = I[_IDX, q]
-        _retire(q, i, W, I, out_t, out_id, counters, tested)
+        _retire(q, i, W, I, out_t, out_id, counters)
         n -= 1
         if q < n:
             for row in range(_NW):
@@ -188,6 +309,7 @@ def _compact(n, s, W, I, out_t, out_id, counters, tested):
             I[_BID, q] = I[_BID, n]
             I[_IDX, q] = I[_IDX, n]
             I[_NL, q] = I[_NL, n]
+            I[_NT, q] = I[_NT, n]
             I[_IDX, n] = i
     return n, retired
 
@@ -206,17 +328,9 @@ def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0, fr, edge, 
     (common origin ``o``) for triangles wider than EDGE_MIN cells."""
     alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v = fr
     va, vb, vc = (ax, ay, az), (bx, by, bz), (cx, cy, cz)
-    k0 = sig * ((va[K] - gp[K]) * gp[6 + K] - P0)
-    k1 = sig * ((vb[K] - gp[K]) * gp[6 + K] - P0)
-    k2 = sig * ((vc[K] - gp[K]) * gp[6 + K] - P0)
-    gu0 = (va[U] - gp[U]) * gp[6 + U]
-    gu1 = (vb[U] - gp[U]) * gp[6 + U]
-    gu2 = (vc[U] - gp[U]) * gp[6 + U]
+    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
     if _plane_cull(gu0, gu1, gu2, k0, k1, k2, alo_u, slo_u, ahi_u, shi_u):
         return True
-    gv0 = (va[V] - gp[V]) * gp[6 + V]
-    gv1 = (vb[V] - gp[V]) * gp[6 + V]
-    gv2 = (vc[V] - gp[V]) * gp[6 + V]
     if _plane_cull(gv0, gv1, gv2, k0, k1, k2, alo_v, slo_v, ahi_v, shi_v):
         return True
     if not edge or (max(gu0, gu1, gu2) - min(gu0, gu1, gu2) <= EDGE_MIN
