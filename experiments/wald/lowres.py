@@ -180,11 +180,10 @@ def _summary(df, fit, rounds) -> str:
               f"{float((df.nocull_tests / df.tests).median() - 1) * 100:.0f} % tests (median) but only "
               f"{float(df.nocull_time_ratio.median() - 1) * 100:.0f} % time, so a test lane costs far less than the "
               "model's share suggests, and most of the low-resolution time goes to the per-triangle work before the "
-              "test (mailbox stamp, vertex loads, culling planes) and per-ray set-up. Culling triangles per group of "
-              "8 rays (each group its own frustum, the packet's plane test; tried on dragon-202k) cut the tests "
-              "2.7-2.8x at 512² yet did not make the trace faster (per group, or one SIMD loop over the first to the "
-              "last group a triangle may meet: CGT/Embree 0.53-0.39 against 0.60 without), so it is not in the "
-              "kernel. This machine is shared by other jobs: read the paired ratios, not the Mrays/s."]
+              "test (mailbox stamp, vertex loads, culling planes) and per-ray set-up. Culling also runs per group of "
+              "8 rays, each group with its own frustum (`tracer.accel.packet_kernels._groups`): the tests column is "
+              "what is left after it, and switching culling off switches both off. This machine is shared by other "
+              "jobs: read the paired ratios, not the Mrays/s."]
     return "\n".join(lines) + "\n"
 
 

@@ -1,6 +1,6 @@
 """Building blocks of the coherent grid traversal's packet loop (:func:`tracer.accel.packet._packets`,
 see :mod:`tracer.accel.packet` for the algorithm): the per-thread work-array layout, the branch-free
-ray-packet/triangle test LLVM vectorises, the frustum (bounds of the packet and of each group of
+ray-packet/triangle test on LLVM vectors of LANES rays, the frustum (bounds of the packet and of each group of
 LANES slots, cell ranges, which rays still need slices) and frustum culling (planes, then corner
 rays against the triangle's edges; then the groups' own frusta).
 """
@@ -238,10 +238,10 @@ def _groups(n, GB, ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
     """The lanes [lo, hi) of rays [0, n) the triangle may meet, whole groups of LANES slots: from the
     first to the last group whose frustum the triangle's grid-space box (u, v against k') does not
     lie outside (lo = hi: none). The box test implies the per-vertex plane test of
-    :func:`_plane_cull` on the group's bounds, whose margins already keep every hit. One range, not
-    a list of groups: the ray loop of :func:`_test_tri` vectorises only over a range (a group in
-    between that the triangle misses is tested anyway; a packet's groups are rows of its tile, so
-    the groups a small triangle meets are mostly adjacent)."""
+    :func:`_plane_cull` on the group's bounds, whose margins already keep every hit. One range
+    (first to last such group), not a set: a group in between that the triangle misses is tested
+    anyway, but a packet's groups start as the rows of its tile, so the groups a small triangle meets
+    are mostly adjacent, and a range needs no per-group mask for packets of any size."""
     k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
     kl = min(k0, k1, k2); kh = max(k0, k1, k2)
     ul = min(gu0, gu1, gu2); uh = max(gu0, gu1, gu2)
