@@ -66,7 +66,8 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, LANES, _cells, _compact, _culled, _frustum, _groups, _max,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, LANES, _cells, _compact, _culled, _frame, _frustum,
+    _max,
     _min, _needs, _retire, _span, _spread, _test_tri,
 )
 
@@ -276,8 +277,9 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                             ax = np.float64(tv[r, 0]); ay = np.float64(tv[r, 1]); az = np.float64(tv[r, 2])
                             bx = np.float64(tv[r, 3]); by = np.float64(tv[r, 4]); bz = np.float64(tv[r, 5])
                             cx = np.float64(tv[r, 6]); cy = np.float64(tv[r, 7]); cz = np.float64(tv[r, 8])
+                            fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
                             if cull_now or counting:
-                                out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0, fr,
+                                out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
                                               edge, ox0, oy0, oz0, ru, rv)
                                 if counting and first:
                                     uniq += 1
@@ -288,22 +290,15 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                                     skips += 1
                                     culled += 1
                                     continue
-                            # whole vectors of LANES rays (slots past n hold retired or unused rays, whose
-                            # results are never read); with culling, only the groups whose frusta it may meet
-                            if cull_now and n > LANES:
-                                lo, hi = _groups(n, GB, ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
-                                if lo == hi:
-                                    skips += 1
-                                    culled += 1
-                                    continue
-                            else:
-                                lo, hi = 0, (n + LANES - 1) & -LANES
-                            nh = _test_tri(lo, hi, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin)
-                            acc_lanes += hi - lo
-                            acc_tests += min(n, hi) - lo
-                            if counters is not None:
-                                for q in range(lo, min(n, hi)):
-                                    I[_NT, q] += 1
+                            # whole vectors of LANES rays; with culling, only the groups whose frusta it may meet
+                            nh, lanes, real = _test_tri(n, cull_now and n > LANES, GB, fv, common, W, I, tid,
+                                                        ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
+                            if lanes == 0:
+                                skips += 1
+                                culled += 1
+                                continue
+                            acc_lanes += lanes
+                            acc_tests += real
                             changed = True
                             if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
                                 _needs(n, True, W, I)

@@ -115,13 +115,25 @@ def _tri8o(typingctx, W, I, lo, tri, tid):
     return types.int64(W, I, lo, tri, tid), _tri8_codegen(False)
 
 
+@intrinsic
+def _ctz(typingctx, m):
+    """``_ctz(m)``: the index of the lowest set bit of the int64 ``m`` (m != 0)."""
+    def codegen(context, builder, signature, args):
+        i64 = ir.IntType(64)
+        f = builder.module.declare_intrinsic("llvm.cttz", [i64], ir.FunctionType(i64, [i64, ir.IntType(1)]))
+        return builder.call(f, [args[0], ir.Constant(ir.IntType(1), 1)])
+    return types.int64(types.int64), codegen
+
+
 @ray_jit
-def _test_tri(lo, hi, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin):
-    """Rays [lo, hi) of the packet (whole vectors of LANES) against one triangle (float64 vertices),
-    LANES at a time (:func:`_tri8c`, :func:`_tri8o`), the ray-independent terms hoisted (with a
-    common origin also s = a - o and s.n). Returns how many lanes hit (the any-hit kernel retires
-    those rays at once). Why explicit vectors: LLVM vectorises a plain loop over the lanes only
-    when it runs over a whole packet, not over the few groups the group frusta leave (it unrolled
+def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counting):
+    """Rays [0, n) of the packet against one triangle (float64 vertices; ``fv`` its grid-frame
+    coordinates, :func:`_frame`), a group of LANES slots at a time (:func:`_tri8c`, :func:`_tri8o`);
+    with ``cull`` only the groups :func:`_groups` leaves. The ray-independent terms are hoisted (with
+    a common origin also s = a - o and s.n). Returns (lanes that hit, lanes tested, real rays
+    tested; no lane tested: culled); ``counting`` adds a test to each real ray's I[_NT]. Slots past
+    n hold retired or unused rays, whose results are never read. Why explicit vectors: LLVM vectorises a plain loop over the lanes
+    only when it runs over a whole packet, not over the few groups the group frusta leave (it unrolled
     or kept those scalar: 5-8 ns per lane instead of 3)."""
     e1x = bx - ax
     e1y = by - ay
@@ -133,20 +145,30 @@ def _test_tri(lo, hi, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
     p2nn = _PAR2 * (nx * nx + ny * ny + nz * nz)
-    nh = 0
     tid = np.int32(tid)
-    if common:
-        sx = ax - W[_OX, 0]
-        sy = ay - W[_OY, 0]
-        sz = az - W[_OZ, 0]
-        tri = (sx, sy, sz, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, sx * nx + sy * ny + sz * nz)
-        for i in range(lo, hi, LANES):
-            nh += _tri8c(W, I, i, tri, tid)
-    else:
-        tri = (ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin)
-        for i in range(lo, hi, LANES):
-            nh += _tri8o(W, I, i, tri, tid)
-    return nh
+    sx = ax - W[_OX, 0]
+    sy = ay - W[_OY, 0]
+    sz = az - W[_OZ, 0]
+    tric = (sx, sy, sz, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin, sx * nx + sy * ny + sz * nz)
+    trio = (ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, p2nn, tmin)
+    nh = 0
+    lanes = 0
+    real = 0
+    for b0 in range(0, (n + LANES - 1) // LANES, 64):  # blocks of 64 groups (one bitmask each)
+        groups = _groups(n, cull, GB, fv, b0)
+        while groups != 0:
+            i = (b0 + _ctz(groups)) * LANES
+            groups &= groups - 1
+            if common:
+                nh += _tri8c(W, I, i, tric, tid)
+            else:
+                nh += _tri8o(W, I, i, trio, tid)
+            lanes += LANES
+            real += min(n, i + LANES) - i
+            if counting:
+                for q in range(i, min(n, i + LANES)):
+                    I[_NT, q] += 1
+    return nh, lanes, real
 
 
 @ray_jit
@@ -225,37 +247,78 @@ def _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
             (va[V] - gp[V]) * gp[6 + V], (vb[V] - gp[V]) * gp[6 + V], (vc[V] - gp[V]) * gp[6 + V])
 
 
-@ray_jit
-def _side(lo, hi, alo, ahi, slo, shi, k0, k1):
-    """Does the box [lo, hi] x [k0, k1] (u, k') lie beyond the lower frustum plane u = alo + slo k'
-    or the upper one u = ahi + shi k' of a group (EPS margin)? Then so does every vertex: the plane
-    test of :func:`_plane_cull`."""
-    return (hi - (alo + _min(slo * k0, slo * k1)) < -EPS) | (lo - (ahi + _max(shi * k0, shi * k1)) > EPS)
+@intrinsic
+def _gmask(typingctx, GB, g0, box):
+    """``_gmask(GB, g0, box)``: bitmask (int64, bit j for group g0 + j) of the groups g0 .. g0 + LANES - 1
+    whose frustum (GB[:, g], rows as :func:`_frustum` fills them) the triangle's grid-space box
+    ``box`` = (u_lo, u_hi, v_lo, v_hi, k'_lo, k'_hi) does not lie outside: for each of u and v, beyond
+    the lower plane u = a_lo + s_lo k' (hi - (a_lo + min(s_lo k'_lo, s_lo k'_hi)) < -EPS) or the upper
+    one (lo - (a_hi + max(s_hi k'_lo, s_hi k'_hi)) > EPS). A box beyond a plane has every vertex
+    beyond it, the per-vertex test of :func:`_plane_cull`, whose margin keeps every hit. One
+    ``<LANES x double>`` vector per frustum row, ordered compares (a NaN keeps the group); the caller
+    clears bits of groups past the packet's last."""
+    vd = ir.VectorType(ir.DoubleType(), LANES)
+    vi = ir.VectorType(ir.IntType(32), LANES)
+    i32 = ir.IntType(32)
+
+    def codegen(context, builder, signature, args):
+        b = builder
+        aG, ag0, abox = args
+        G = context.make_array(signature.args[0])(context, b, aG)
+
+        def row(r):
+            p = cgutils.get_item_pointer2(context, b, G.data, cgutils.unpack_tuple(b, G.shape),
+                                          cgutils.unpack_tuple(b, G.strides), "A", [ir.Constant(ag0.type, r), ag0])
+            return b.load(b.bitcast(p, vd.as_pointer()), align=8)
+
+        def splat(x):
+            v = b.insert_element(ir.Constant(vd, ir.Undefined), x, i32(0))
+            return b.shuffle_vector(v, ir.Constant(vd, ir.Undefined), ir.Constant(vi, [0] * LANES))
+
+        ul, uh, vl, vh, kl, kh = (splat(b.extract_value(abox, k)) for k in range(6))
+        mul, add, sub, cmp = b.fmul, b.fadd, b.fsub, b.fcmp_ordered
+
+        def vmin(x, y):
+            return b.select(cmp("<", x, y), x, y)
+
+        def vmax(x, y):
+            return b.select(cmp(">", x, y), x, y)
+
+        eps = ir.Constant(vd, [EPS] * LANES)
+        neps = ir.Constant(vd, [-EPS] * LANES)
+        out = None
+        for r0, lo, hi in ((0, ul, uh), (4, vl, vh)):
+            alo, ahi, slo, shi = row(r0), row(r0 + 1), row(r0 + 2), row(r0 + 3)
+            below = cmp("<", sub(hi, add(alo, vmin(mul(slo, kl), mul(slo, kh)))), neps)
+            above = cmp(">", sub(lo, add(ahi, vmax(mul(shi, kl), mul(shi, kh)))), eps)
+            o = b.or_(below, above)
+            out = o if out is None else b.or_(out, o)
+        keep = b.xor(out, ir.Constant(ir.VectorType(ir.IntType(1), LANES), [1] * LANES))
+        return b.zext(b.bitcast(keep, ir.IntType(LANES)), ir.IntType(64))
+
+    return types.int64(GB, g0, box), codegen
 
 
 @ray_jit
-def _groups(n, GB, ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
-    """The lanes [lo, hi) of rays [0, n) the triangle may meet, whole groups of LANES slots: from the
-    first to the last group whose frustum the triangle's grid-space box (u, v against k') does not
-    lie outside (lo = hi: none). The box test implies the per-vertex plane test of
-    :func:`_plane_cull` on the group's bounds, whose margins already keep every hit. One range
-    (first to last such group), not a set: a group in between that the triangle misses is tested
-    anyway, but a packet's groups start as the rows of its tile, so the groups a small triangle meets
-    are mostly adjacent, and a range needs no per-group mask for packets of any size."""
-    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
-    kl = min(k0, k1, k2); kh = max(k0, k1, k2)
-    ul = min(gu0, gu1, gu2); uh = max(gu0, gu1, gu2)
-    vl = min(gv0, gv1, gv2); vh = max(gv0, gv1, gv2)
-    first = 1 << 30
-    last = -1
-    for g in range((n + LANES - 1) // LANES):
-        if not (_side(ul, uh, GB[0, g], GB[1, g], GB[2, g], GB[3, g], kl, kh)
-                or _side(vl, vh, GB[4, g], GB[5, g], GB[6, g], GB[7, g], kl, kh)):
-            first = min(first, g)
-            last = g
-    if last < 0:
-        return 0, 0
-    return first * LANES, last * LANES + LANES
+def _groups(n, cull, GB, fv, b0):
+    """Bitmask (bit j: group b0 + j) of the packet's groups of LANES slots among b0 .. b0 + 63 (rays
+    [0, n)) the triangle whose frame coordinates (:func:`_frame`) are ``fv`` may meet: with
+    ``cull`` the groups whose frustum its grid-space box does not lie outside (:func:`_gmask`), else
+    every group. A set rather than one range: a triangle meets one or two rows of an 8x8 packet, not
+    always adjacent slots once retired rays are replaced."""
+    ng = min((n + LANES - 1) // LANES, b0 + 64)
+    if not cull:
+        return -1 if ng - b0 == 64 else (1 << (ng - b0)) - 1
+    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = fv
+    box = (min(gu0, gu1, gu2), max(gu0, gu1, gu2), min(gv0, gv1, gv2), max(gv0, gv1, gv2),
+           min(k0, k1, k2), max(k0, k1, k2))
+    m = 0
+    for g0 in range(b0, ng, LANES):
+        mg = _gmask(GB, g0, box)
+        if ng - g0 < LANES:
+            mg &= (1 << (ng - g0)) - 1
+        m |= mg << (g0 - b0)
+    return m
 
 
 @ray_jit
@@ -323,12 +386,13 @@ def _cells(alo, ahi, slo, shi, s0, s1, n):
 
 
 @ray_jit
-def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0, fr, edge, ox, oy, oz, ru, rv):
-    """Is the triangle outside the frustum ``fr``? Planes first; corner rays against the edges
-    (common origin ``o``) for triangles wider than EDGE_MIN cells."""
+def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr, edge, ox, oy, oz, ru, rv):
+    """Is the triangle outside the frustum ``fr``? Planes first (``fv``: its vertices in the grid
+    frame, :func:`_frame`); corner rays against the edges (common origin ``o``) for triangles wider
+    than EDGE_MIN cells."""
     alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v = fr
     va, vb, vc = (ax, ay, az), (bx, by, bz), (cx, cy, cz)
-    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
+    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = fv
     if _plane_cull(gu0, gu1, gu2, k0, k1, k2, alo_u, slo_u, ahi_u, shi_u):
         return True
     if _plane_cull(gv0, gv1, gv2, k0, k1, k2, alo_v, slo_v, ahi_v, shi_v):
