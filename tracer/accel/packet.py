@@ -57,7 +57,7 @@ import numba
 import numpy as np
 from numba import prange
 
-from tracer.accel._jit import jit, pjit, store_ray
+from tracer.accel._jit import jit, pjit, ray_jit, store_ray
 from tracer.accel import COUNTER_NAMES, Accel, Counters, Hits, as_rays, tmax_array
 from tracer.accel.constants import WALD_LAMBDA, WALD_MACROCELL
 from tracer.errors import GridcostError
@@ -93,6 +93,108 @@ CULL_MIN_RAYS = 8
 CHUNK = 16
 
 
+# ---------------------------------------------------------------- the packet's set-up
+@ray_jit
+def _load_clip(b, cnt, O, D, tmin, tmax, gp, W, out_t, out_id):
+    """Rays [b, b + cnt) into slots [0, cnt) of the work arrays (float64 origin, direction, tmax as
+    W[_BEST]), their results reset to a miss, and each clipped to the grid box: W[_C0] (NaN when a
+    zero direction lies on a slab plane: the careful test is :func:`_sort`'s), W[_C1]. Returns how
+    many may meet the box. Three loops, so that the clipping (the divisions) runs on the work array
+    alone and LLVM vectorises it without alias checks against the ray arrays."""
+    for q in range(cnt):
+        i = np.uintp(b + q)  # unsigned: no negative-index wraparound
+        W[_OX, q] = np.float64(O[i, 0]); W[_OY, q] = np.float64(O[i, 1]); W[_OZ, q] = np.float64(O[i, 2])
+        W[_DX, q] = np.float64(D[i, 0]); W[_DY, q] = np.float64(D[i, 1]); W[_DZ, q] = np.float64(D[i, 2])
+        W[_BEST, q] = np.float64(tmax[i])
+    for q in range(cnt):
+        i = np.uintp(b + q)
+        out_t[i] = np.float32(INF)
+        out_id[i] = -1
+    inbox = 0
+    x0, y0, z0, x1, y1, z1 = gp[0], gp[1], gp[2], gp[9], gp[10], gp[11]
+    for q in range(cnt):
+        ox = W[_OX, q]; oy = W[_OY, q]; oz = W[_OZ, q]
+        ix, iy, iz = 1.0 / W[_DX, q], 1.0 / W[_DY, q], 1.0 / W[_DZ, q]
+        xa = (x0 - ox) * ix; xb = (x1 - ox) * ix
+        ya = (y0 - oy) * iy; yb = (y1 - oy) * iy
+        za = (z0 - oz) * iz; zb = (z1 - oz) * iz
+        t0 = _max(_max(tmin, _min(xa, xb)), _max(_min(ya, yb), _min(za, zb)))
+        t1 = _min(_min(W[_BEST, q], _max(xa, xb)), _min(_max(ya, yb), _max(za, zb)))
+        nan = (xa != xa) | (xb != xb) | (ya != ya) | (yb != yb) | (za != za) | (zb != zb)
+        W[_C0, q] = np.nan if nan else t0
+        W[_C1, q] = t1
+        inbox += nan or not (t0 > t1)  # NaN (a zero direction on a slab plane) counts as inside
+    return inbox
+
+
+@ray_jit
+def _sort(b, cnt, any_in, tmin, tmax, gp, K, U, V, sig, W, I):
+    """Sort the loaded rays (slots [0, cnt), :func:`_load_clip`) into packet rays, moved down to
+    slots [0, n) (grid-space k of the origin W[_KO], dk/dt W[_KD], slopes du/dk, dv/dk in W[_AU],
+    W[_AV] for now, exit W[_T1]), and single rays (their ray ids in I[_SINGLE, :ns]): a packet ray
+    meets the box, runs along +K (sig > 0) or -K, and is no steeper than MAX_SLOPE. Returns (n, ns,
+    lowest and highest grid-space k at the rays' box entries). A first loop computes every slot in
+    place (vectorised: the K, U, V components are rows _OX + K ...); slots move only when a ray is
+    not a packet ray or needs the careful slab test (NaN entry)."""
+    gpk, gsk, gsu, gsv = gp[K], gp[6 + K], gp[6 + U], gp[6 + V]
+    nok = 0
+    kin_lo = INF
+    kin_hi = -INF
+    for q in range(cnt if any_in else 0):
+        t0 = W[_C0, q]
+        t1 = W[_C1, q]
+        gdk = W[_DX + K, q] * gsk
+        gdu = W[_DX + U, q] * gsu
+        gdv = W[_DX + V, q] * gsv
+        gok = (W[_OX + K, q] - gpk) * gsk
+        ok = (t0 <= t1) & (sig * gdk > 0.0) & (abs(gdu) <= MAX_SLOPE * abs(gdk)) & (abs(gdv) <= MAX_SLOPE * abs(gdk))
+        kin = gok + t0 * gdk
+        kin_lo = _min(kin_lo, kin if ok else INF)
+        kin_hi = _max(kin_hi, kin if ok else -INF)
+        W[_DD, q] = W[_DX, q] * W[_DX, q] + W[_DY, q] * W[_DY, q] + W[_DZ, q] * W[_DZ, q]
+        W[_T1, q] = t1
+        W[_KO, q] = gok
+        W[_KD, q] = gdk
+        W[_AU, q] = gdu / gdk
+        W[_AV, q] = gdv / gdk
+        I[_BID, q] = -1
+        I[_NT, q] = 0
+        I[_IDX, q] = b + q
+        nok += ok
+    if nok == cnt:
+        return cnt, 0, kin_lo, kin_hi
+    n = 0
+    ns = 0
+    for q in range(cnt if any_in else 0):
+        t0 = W[_C0, q]
+        t1 = W[_C1, q]
+        if t0 > t1:
+            continue
+        if not (t0 <= t1):  # NaN from a zero direction: the careful slab test
+            i = b + q
+            t0, t1 = ray_box(W[_OX, q], W[_OY, q], W[_OZ, q], W[_DX, q], W[_DY, q], W[_DZ, q], gp[0], gp[1], gp[2],
+                             gp[9], gp[10], gp[11], tmin, np.float64(tmax[i]))
+            if t0 > t1:
+                continue
+            W[_T1, q] = t1
+        gdk = W[_KD, q]
+        gdu = W[_DX + U, q] * gsu
+        gdv = W[_DX + V, q] * gsv
+        if sig * gdk > 0.0 and abs(gdu) <= MAX_SLOPE * abs(gdk) and abs(gdv) <= MAX_SLOPE * abs(gdk):
+            kin = W[_KO, q] + t0 * gdk
+            kin_lo = min(kin_lo, kin)
+            kin_hi = max(kin_hi, kin)
+            if n != q:
+                for row in (_OX, _OY, _OZ, _DX, _DY, _DZ, _DD, _BEST, _T1, _KO, _KD, _AU, _AV):
+                    W[row, n] = W[row, q]
+                I[_IDX, n] = I[_IDX, q]
+            n += 1
+        else:
+            I[_SINGLE, ns] = b + q
+            ns += 1
+    return n, ns, kin_lo, kin_hi
+
+
 # ---------------------------------------------------------------- the packet loop
 @jit
 def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tri_ids, tv, macro, M,
@@ -107,82 +209,24 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
         b = p * k2
         e = min(m, b + k2)
         pid = np.int32(p)
-        # ---- clip every ray to the box (one vectorised loop)
-        inbox = 0
-        for q in range(e - b):
-            i = np.uintp(b + q)  # unsigned: no negative-index wraparound, so LLVM vectorises the loop
-            ox = np.float64(O[i, 0]); oy = np.float64(O[i, 1]); oz = np.float64(O[i, 2])
-            dx = np.float64(D[i, 0]); dy = np.float64(D[i, 1]); dz = np.float64(D[i, 2])
-            ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
-            xa = (gp[0] - ox) * ix; xb = (gp[9] - ox) * ix
-            ya = (gp[1] - oy) * iy; yb = (gp[10] - oy) * iy
-            za = (gp[2] - oz) * iz; zb = (gp[11] - oz) * iz
-            t0 = _max(_max(tmin, _min(xa, xb)), _max(_min(ya, yb), _min(za, zb)))
-            t1 = _min(_min(np.float64(tmax[i]), _max(xa, xb)), _min(_max(ya, yb), _max(za, zb)))
-            nan = (xa != xa) | (xb != xb) | (ya != ya) | (yb != yb) | (za != za) | (zb != zb)
-            W[_C0, q] = np.nan if nan else t0
-            W[_C1, q] = t1
-            inbox += nan or not (t0 > t1)  # NaN (a zero direction on a slab plane) counts as inside
-            out_t[i] = np.float32(INF)
-            out_id[i] = -1
+        cnt = e - b
+        inbox = _load_clip(b, cnt, O, D, tmin, tmax, gp, W, out_t, out_id)
         if inbox == 0 and pc is None:
             continue
         # ---- major axis: dominant component of the first, middle and last rays' summed grid-space
         # directions (Wald takes the first ray's; three guard against one odd ray)
-        h = (b + e - 1) // 2
-        sx = (np.float64(D[b, 0]) + np.float64(D[h, 0]) + np.float64(D[e - 1, 0])) * gp[6]
-        sy = (np.float64(D[b, 1]) + np.float64(D[h, 1]) + np.float64(D[e - 1, 1])) * gp[7]
-        sz = (np.float64(D[b, 2]) + np.float64(D[h, 2]) + np.float64(D[e - 1, 2])) * gp[8]
+        h = (cnt - 1) // 2
+        sx = (W[_DX, 0] + W[_DX, h] + W[_DX, cnt - 1]) * gp[6]
+        sy = (W[_DY, 0] + W[_DY, h] + W[_DY, cnt - 1]) * gp[7]
+        sz = (W[_DZ, 0] + W[_DZ, h] + W[_DZ, cnt - 1]) * gp[8]
         K, sk = (0, sx) if abs(sx) >= abs(sy) and abs(sx) >= abs(sz) else ((1, sy) if abs(sy) >= abs(sz) else (2, sz))
         U, V = (K + 1) % 3, (K + 2) % 3
         sig, isig = (1.0, 1) if sk >= 0.0 else (-1.0, -1)
         nK, nU, nV = res[K], res[U], res[V]
         st3 = (1, nxg, nxg * nyg)  # cell strides along x, y, z
         stK, stU, stV = st3[K], st3[U], st3[V]
-        # ---- sort the rays meeting the box into packet rays and single rays
-        n = 0
-        ns = 0
-        kin_lo = INF
-        kin_hi = -INF
-        for q in range(e - b if inbox > 0 else 0):
-            t0 = W[_C0, q]
-            t1 = W[_C1, q]
-            if t0 > t1:
-                continue
-            i = b + q
-            ox = np.float64(O[i, 0]); oy = np.float64(O[i, 1]); oz = np.float64(O[i, 2])
-            dx = np.float64(D[i, 0]); dy = np.float64(D[i, 1]); dz = np.float64(D[i, 2])
-            if not (t0 <= t1):  # NaN from a zero direction: the careful slab test
-                t0, t1 = ray_box(ox, oy, oz, dx, dy, dz, gp[0], gp[1], gp[2], gp[9], gp[10], gp[11], tmin,
-                                 np.float64(tmax[i]))
-            if t0 > t1:
-                continue
-            o3 = (ox, oy, oz)
-            d3 = (dx, dy, dz)
-            gdk = d3[K] * gp[6 + K]
-            gdu = d3[U] * gp[6 + U]
-            gdv = d3[V] * gp[6 + V]
-            if sig * gdk > 0.0 and abs(gdu) <= MAX_SLOPE * abs(gdk) and abs(gdv) <= MAX_SLOPE * abs(gdk):
-                W[_OX, n] = ox; W[_OY, n] = oy; W[_OZ, n] = oz
-                W[_DX, n] = dx; W[_DY, n] = dy; W[_DZ, n] = dz
-                W[_DD, n] = dx * dx + dy * dy + dz * dz
-                W[_BEST, n] = np.float64(tmax[i])
-                I[_BID, n] = -1
-                I[_IDX, n] = i
-                I[_NT, n] = 0
-                W[_T1, n] = t1
-                gok = (o3[K] - gp[K]) * gp[6 + K]
-                kin = gok + t0 * gdk
-                kin_lo = min(kin_lo, kin)
-                kin_hi = max(kin_hi, kin)
-                W[_KO, n] = gok
-                W[_KD, n] = gdk
-                W[_AU, n] = gdu / gdk  # slopes for now
-                W[_AV, n] = gdv / gdk
-                n += 1
-            else:
-                I[_SINGLE, ns] = i
-                ns += 1
+        # ---- sort the rays meeting the box into packet rays (slots [0, n)) and single rays
+        n, ns, kin_lo, kin_hi = _sort(b, cnt, inbox > 0, tmin, tmax, gp, K, U, V, sig, W, I)
         slices = cells = considered = uniq = skips = mskips = culled = 0
         acc_plain = acc_mb = acc_fc = acc_tests = acc_lanes = 0  # ray-triangle tests: no MB, MB, MB + FC, done
         n_in = n
@@ -196,12 +240,12 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 P0 = np.float64(jf + 1)
             nmax = (nK - 1 - jf) if isig > 0 else jf
             common = True
+            gpu, gsu, gpv, gsv = gp[U], gp[6 + U], gp[V], gp[6 + V]
             for q in range(n):
-                o3 = (W[_OX, q], W[_OY, q], W[_OZ, q])
                 su = W[_AU, q]
                 sv = W[_AV, q]
-                W[_AU, q] = (o3[U] - gp[U]) * gp[6 + U] + (P0 - W[_KO, q]) * su
-                W[_AV, q] = (o3[V] - gp[V]) * gp[6 + V] + (P0 - W[_KO, q]) * sv
+                W[_AU, q] = (W[_OX + U, q] - gpu) * gsu + (P0 - W[_KO, q]) * su
+                W[_AV, q] = (W[_OX + V, q] - gpv) * gsv + (P0 - W[_KO, q]) * sv
                 W[_SU, q] = sig * su
                 W[_SV, q] = sig * sv
                 W[_KO, q] = sig * (W[_KO, q] - P0)  # k'(t) = pko + t pkd from now on
