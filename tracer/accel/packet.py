@@ -20,9 +20,9 @@ packets, each thread with its own work arrays):
    planes or, with a common origin, when the four corner rays miss it on one edge (Dmitriev's shaft
    culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays). Then the group
    frusta: the packet's slots form groups of LANES rays (a row of the tile until retired rays are
-   replaced), each with its own frustum bounds, and a triangle is tested only on the range of groups
-   whose frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8
-   packet). Every test keeps a margin far above rounding, so culling never drops a hit.
+   replaced), each with its own frustum bounds, and a triangle is tested only on the groups whose
+   frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8 packet):
+   one vector compare per bound gives the bitmask of those groups. Every test keeps a margin far above rounding, so culling never drops a hit.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the
@@ -239,8 +239,9 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 jf = min(max(int(math.floor(kin_hi + EPS)), 0), nK - 1)
                 P0 = np.float64(jf + 1)
             nmax = (nK - 1 - jf) if isig > 0 else jf
-            common = True
             gpu, gsu, gpv, gsv = gp[U], gp[6 + U], gp[V], gp[6 + V]
+            ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
+            other = 0  # rays whose origin is not ray 0's (a branch-free count, so the loop vectorises)
             for q in range(n):
                 su = W[_AU, q]
                 sv = W[_AV, q]
@@ -251,8 +252,8 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 W[_KO, q] = sig * (W[_KO, q] - P0)  # k'(t) = pko + t pkd from now on
                 W[_KD, q] = sig * W[_KD, q]
                 I[_NL, q] = min(int(math.floor(W[_KO, q] + W[_T1, q] * W[_KD, q] + EPS)), nmax)  # last slice it needs
-                if W[_OX, q] != W[_OX, 0] or W[_OY, q] != W[_OY, 0] or W[_OZ, q] != W[_OZ, 0]:
-                    common = False
+                other += (W[_OX, q] != ox0) | (W[_OY, q] != oy0) | (W[_OZ, q] != oz0)
+            common = other == 0
             fr = _frustum(n, W, GB)
             if (fr[3] - fr[2] > MAX_SPREAD or fr[7] - fr[6] > MAX_SPREAD
                     or fr[1] - fr[0] > MAX_WIDTH or fr[5] - fr[4] > MAX_WIDTH):
