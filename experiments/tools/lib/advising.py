@@ -82,7 +82,8 @@ def calibration(ctx, log) -> dict:
            "grid_ti_over_ts": dens.ti_over_ts_, "grid_fallback": dens.fallback_, "grid_density_note": dens.note()}
     log(f"advise: the BVH4's SAH weight C_trav/C_isect {sah.trav_cost_:.2f}, fitted {how['bvh']}"
         + (f"; {sah.note()}" if sah.free_ else ""))
-    log(f"advise: the grid's cells {dens.factor_:.2f}N (Ize Eq 4, T_i/T_s {dens.ti_over_ts_:.2f}), fitted {how['grid']}"
+    ratio = "the paper's T_i/T_s" if dens.fallback_ else f"T_i/T_s {dens.ti_over_ts_:.2f}"
+    log(f"advise: the grid's cells {dens.factor_:.2f}N (Ize Eq 4, {ratio}), fitted {how['grid']}"
         + (f"; {dens.note()}" if dens.note() else ""))
     for kind in ("random", "path"):
         out[kind] = {}
