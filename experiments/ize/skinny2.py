@@ -119,9 +119,11 @@ def _summary(tab, n_rays, repeats, threads) -> str:
             f"{r.skinny_speedup:.2f}x [{r.skinny_speedup_range}] | {r.skinny_vs_8N:.2f}x, {r.compact_vs_8N:.2f}x | "
             f"{r.skinny_tests_camera:.1f}, {r.compact_tests_camera:.1f} |")
     faster = tab[tab.skinny_speedup_camera > 1]
-    lines += ["", "† The paper's text: '1.6x and 1.2x rendering speed increase for the 1996 and respectively, 196 "
-              "triangle cylinders'; its cylinders are 196, 3996 and 19996 triangles, so which one the 1.6x belongs to "
-              "is not certain; it stands beside both.", "", "## Reading", "",
+    g = _GAIN["capped-cylinder-1996"]
+    sizes = ", ".join(f"{r['N']:,}" for r in ize2007.TABLE3.records())
+    lines += ["", f"† The paper's text ({g.where}): \"{g.quote}\"; its cylinders ({ize2007.TABLE3.where}) have "
+              f"{sizes} triangles, so which one the {g.value:g}x belongs to is not certain; it stands beside both.", "",
+              "## Reading", "",
               f"The skinny rule is faster on camera rays for {len(faster)} of {len(tab)} cylinders here "
               f"({', '.join(faster.scene) if len(faster) else 'none'}); the paper reports it faster on both of its "
               "cylinders. Its grids are much larger (Eq 18's space is super-linear, see `derive`), and where it loses, "

@@ -26,7 +26,7 @@ from experiments.wald.lib.views import paper_cell as _p
 from experiments.wald.lib.views import light_position, paired, scene_label, shadow_rays, wald_camera
 from tracer.accel.grid import UniformGrid
 from tracer.accel.packet import CoherentGrid
-from tracer.measure.provenance import doubles_per_vector
+from tracer.measure.machine import doubles_per_vector
 from tracer.measure.timing import clock_name
 
 #: the paper's Table 3 (frames per second at 1024², 1 thread): paper scene -> (single-ray, 8x8 packets, ratio)

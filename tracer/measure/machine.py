@@ -91,6 +91,17 @@ def stream_gbs(nbytes: int, repeats: int = 3) -> float:
     return buf.nbytes / float(np.median(times)) / 1e9
 
 
+def doubles_per_vector() -> int:
+    """float64 lanes in one vector register of this CPU, as LLVM reports its features: 8 with
+    AVX-512, 4 with AVX, else 2 (the packet test's ``<8 x double>`` takes 8 / this many instructions)."""
+    try:
+        import llvmlite.binding as llvm
+        f = llvm.get_host_cpu_features()
+    except Exception:  # no llvmlite host query: say the SSE2 width every x86-64 has
+        return 2
+    return 8 if f.get("avx512f", False) else (4 if f.get("avx", False) else 2)
+
+
 def machine_dir() -> Path:
     from tracer.settings import current
     env = current().machine_dir

@@ -188,34 +188,18 @@ def cpu_model() -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def cpu_features() -> frozenset:
-    """The host CPU's instruction-set features as LLVM names them (``avx2``, ``avx512f`` ...); the
-    flags of /proc/cpuinfo when llvmlite cannot tell; empty when neither can."""
+def bvh_width() -> int:
+    """Children per node of the wide BVH (:mod:`tracer.accel.wide_bvh`) on this CPU: 8 when LLVM reports
+    AVX2 for the host (``<8 x float>`` is one register), else 4; /proc/cpuinfo when llvmlite cannot tell."""
     try:
         import llvmlite.binding as llvm
-        return frozenset(k for k, v in llvm.get_host_cpu_features().items() if v)
+        return 8 if llvm.get_host_cpu_features().get("avx2", False) else 4
     except Exception:
         try:
             with open("/proc/cpuinfo") as f:
-                for line in f:
-                    if line.startswith("flags"):
-                        return frozenset(line.split(":", 1)[1].split())
+                return 8 if " avx2" in f.read() else 4
         except OSError:
-            pass
-        return frozenset()
-
-
-def bvh_width() -> int:
-    """Children per node of the wide BVH (:mod:`tracer.accel.wide_bvh`) on this CPU: 8 when the host
-    has AVX2 (``<8 x float>`` is one register), else 4."""
-    return 8 if "avx2" in cpu_features() else 4
-
-
-def doubles_per_vector() -> int:
-    """float64 lanes in one of this CPU's vector registers: 8 with AVX-512, 4 with AVX, else 2 (an
-    ``<8 x double>`` LLVM vector, as the packet test uses, takes 8 / this many instructions)."""
-    f = cpu_features()
-    return 8 if "avx512f" in f else (4 if "avx" in f else 2)
+            return 4
 
 
 def host() -> str:
