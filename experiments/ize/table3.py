@@ -1,7 +1,7 @@
-"""``table3``: Ize 2007 Table 3 — long skinny triangles (tessellated cylinders N = 196, 3996,
-19996): one-level grids with M = 8 N^1.5 (Eq 8 with Ti/Ts = 4) and with Ti/Ts fitted here, against the
-best swept M; penalty, cell memory, and the speed-up / size over M = 8N (paper: 1.25x/1.7x/2x faster,
-14x/63x/141x larger)."""
+"""``table3``: Ize 2007 Table 3 — long skinny triangles (the paper's tessellated cylinders): one-level
+grids with M = 8 N^1.5 (Eq 8 with Ti/Ts = 4) and with Ti/Ts fitted here, against the best swept M;
+penalty, cell memory, and the speed-up / size over M = 8N beside the paper's
+(:data:`costmodel.papers.ize2007.TABLE3`, :data:`costmodel.papers.ize2007.SKINNY_GAIN`)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,6 +1,6 @@
 """``table4``: Ize 2007 Table 4 — two-level grids with M1 = (8N)^(3/5) and M2 = 8 N2 against the best
 M1 found by sweeping (M2 = 8 N2 kept); total cells, penalty, and the speed-up over the best one-level
-grid (paper: about 2x on Buddha, 2.4x on the conference room)."""
+grid beside the paper's (:data:`costmodel.papers.ize2007.TWO_LEVEL_GAIN`)."""
 from __future__ import annotations
 
 import pandas as pd
