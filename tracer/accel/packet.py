@@ -22,7 +22,8 @@ packets, each thread with its own work arrays):
    frusta: the packet's slots form groups of LANES rays (a row of the tile until retired rays are
    replaced), each with its own frustum bounds, and a triangle is tested only on the groups whose
    frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8 packet):
-   one vector compare per bound gives the bitmask of those groups. Every test keeps a margin far above rounding, so culling never drops a hit.
+   one vector compare per bound gives the bitmask of those groups. Every test keeps a margin far
+   above rounding, so culling never drops a hit.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the

@@ -132,9 +132,9 @@ def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy
     with ``cull`` only the groups :func:`_groups` leaves. The ray-independent terms are hoisted (with
     a common origin also s = a - o and s.n). Returns (lanes that hit, lanes tested, real rays
     tested; no lane tested: culled); ``counting`` adds a test to each real ray's I[_NT]. Slots past
-    n hold retired or unused rays, whose results are never read. Why explicit vectors: LLVM vectorises a plain loop over the lanes
-    only when it runs over a whole packet, not over the few groups the group frusta leave (it unrolled
-    or kept those scalar: 5-8 ns per lane instead of 3)."""
+    n hold retired or unused rays, whose results are never read. Why explicit vectors: LLVM
+    vectorises a plain loop over the lanes only when it runs over a whole packet, not over the few
+    groups the group frusta leave (it unrolled or kept those scalar: 5-8 ns per lane instead of 3)."""
     e1x = bx - ax
     e1y = by - ay
     e1z = bz - az
@@ -249,8 +249,8 @@ def _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0):
 
 @intrinsic
 def _gmask(typingctx, GB, g0, box):
-    """``_gmask(GB, g0, box)``: bitmask (int64, bit j for group g0 + j) of the groups g0 .. g0 + LANES - 1
-    whose frustum (GB[:, g], rows as :func:`_frustum` fills them) the triangle's grid-space box
+    """``_gmask(GB, g0, box)``: bitmask (int64, bit j for group g0 + j) of the groups g0 .. g0 + LANES
+    - 1 whose frustum (GB[:, g], rows as :func:`_frustum` fills them) the triangle's grid-space box
     ``box`` = (u_lo, u_hi, v_lo, v_hi, k'_lo, k'_hi) does not lie outside: for each of u and v, beyond
     the lower plane u = a_lo + s_lo k' (hi - (a_lo + min(s_lo k'_lo, s_lo k'_hi)) < -EPS) or the upper
     one (lo - (a_hi + max(s_hi k'_lo, s_hi k'_hi)) > EPS). A box beyond a plane has every vertex
