@@ -66,6 +66,10 @@ ALL_ORDER = ["derive", "table2", "table3", "table4", "ize-levels", "ize-skinny2"
 READS = {"fig2": ("table2", "table3"), "fig1h": ("table1h",), "fig2h": ("table1h",), "selector": ("table1h",),
          "havran": ("table1h",), "stability": ("exponents",), "predict": ("table2", "table3", "exponents", "fig1h"),
          "scorecard": tuple(t for t in ALL_ORDER if t != "scorecard")}
+#: targets `all --jobs` runs with no neighbour (:mod:`experiments.core.lanes`): their results are
+#: absolute times measured minutes apart (advise-check: a probe against the truth), which a target
+#: running beside them would shift
+ALONE = frozenset({"advise-check"})
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -274,7 +278,7 @@ def _run_lanes(ctx, args) -> int:
     from experiments.core.lanes import run_lanes
     from experiments.core.store import write_index
     status = run_lanes(ALL_ORDER, READS, lambda t: _sub_argv(t, args), args.jobs,
-                       expected_seconds(args.out, ALL_ORDER, args.quick))
+                       expected_seconds(args.out, ALL_ORDER, args.quick), alone=ALONE)
     if ctx.out.is_dir():  # the children each rewrote it; once more with every folder in place
         write_index(ctx.out, ctx.fig_dir)
     return _all_status({k: v for k, v in status.items() if v})

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from experiments.core.lanes import longest_first, run_lanes
+from experiments.core.lanes import longest_first, run_lanes, startable
 from experiments.core.store import PointStore
 
 
@@ -46,6 +46,31 @@ def test_targets_start_after_what_they_read_and_at_most_jobs_at_once(tmp_path, c
     assert len({pid for _, _, pid in span.values()}) == 2 and os.getpid() not in {p for _, _, p in span.values()}
     out = capsys.readouterr()
     assert out.out.count("out of") == 5 and "all: e finished, exit 0" in out.err
+
+
+def test_a_target_that_runs_alone_has_no_neighbour(tmp_path):
+    """advise-check's probe and truth are absolute times minutes apart: nothing runs beside it."""
+    seconds = {"long": 0.6, "lone": 0.3, "b": 0.2, "c": 0.2, "last": 0.1}
+    reads = {"last": ("lone",)}
+    status = run_lanes(list(seconds), reads, lambda n: [n, str(seconds[n]), str(tmp_path), "0"], jobs=2,
+                       expected={"lone": 100, "long": 10}, main=stand_in, alone={"lone"})
+    assert set(status.values()) == {0}
+    span = {k: json.loads((tmp_path / k).read_text()) for k in seconds}
+    s, e, _ = span["lone"]
+    for k, (s2, e2, _) in span.items():  # no other target's run overlaps lone's
+        assert k == "lone" or e2 <= s or s2 >= e, (k, span)
+    # longest first would have started lone first; it waited for the targets that could share the machine
+    assert s >= max(span[k][1] for k in ("long", "b", "c")) and span["last"][0] >= e
+
+
+def test_startable_keeps_lone_targets_for_an_empty_machine():
+    ready = lambda t: t != "blocked"  # noqa: E731
+    assert startable(["lone", "a", "b"], [], ready, {"lone"}) == ["a", "b"]
+    assert startable(["lone", "blocked"], ["a"], ready, {"lone"}) == []  # a still runs
+    assert startable(["lone", "blocked"], [], ready, {"lone"}) == ["lone"]
+    assert startable(["a"], ["lone"], ready, {"lone"}) == []  # nothing beside it
+    assert startable(["lone", "lone2"], [], ready, {"lone", "lone2"}) == ["lone"]  # one at a time
+    assert startable(["a", "b"], ["c"], ready) == ["a", "b"]
 
 
 def test_a_lane_that_dies_fails_its_target_loudly_and_the_rest_go_on(tmp_path, capsys):

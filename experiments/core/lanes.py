@@ -17,6 +17,13 @@ compiled code) fails its target loudly and is replaced.
 
 Among the targets ready to start, the longest first (their wall time in the last run's meta.json,
 :func:`experiments.core.common.expected_seconds`), so the long ones do not end up alone at the end.
+
+Targets in ``alone`` run with no neighbour: one starts only when no other target runs and no other
+target is ready to start, and nothing starts beside it. They are the targets whose results are
+absolute times compared across minutes rather than ratios to a reference timed beside them
+(``advise-check``: a probe's per-ray time against the truth measured minutes later). A neighbour
+changes those times by what it does at that moment: advise-check beside another target met its
+prediction goal on 7 of 16 rows, alone on 14 of 16 (2-core EPYC host).
 """
 from __future__ import annotations
 
@@ -40,6 +47,19 @@ def longest_first(order: list[str], expected: dict) -> list[str]:
 
 def _ready(name: str, reads: dict, done: set, order: list[str]) -> bool:
     return all(d in done for d in reads.get(name, ()) if d in order)
+
+
+def startable(pending: list[str], running: list[str], ready, alone=frozenset()) -> list[str]:
+    """The targets of ``pending`` (in its order) that may start now, beside the ``running`` ones:
+    the ready ones, except that a target of ``alone`` starts only into an empty machine when no
+    other target is ready, and nothing starts beside one. The caller starts them while lanes are free."""
+    if any(r in alone for r in running):
+        return []
+    ok = [t for t in pending if ready(t)]
+    shared = [t for t in ok if t not in alone]
+    if shared or running:
+        return shared
+    return ok[:1]
 
 
 def _in_lane(main, argv: list[str], out: str, err: str) -> int:
@@ -81,9 +101,11 @@ def _stop(signum, frame):
     raise SystemExit(128 + signum)
 
 
-def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict | None = None, main=None) -> dict:
+def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict | None = None, main=None,
+              alone=frozenset()) -> dict:
     """Run ``main(argv_of(name))`` (default :func:`experiments.run.main`; a module-level function) for
-    every target of ``order`` in ``jobs`` lane processes, each once its ``reads`` have finished.
+    every target of ``order`` in ``jobs`` lane processes, each once its ``reads`` have finished
+    (the targets of ``alone`` with no neighbour: :func:`startable`).
     Returns name -> exit status (1 for a target whose lane died). Each target's stdout and stderr
     are printed when it ends (stderr on stderr)."""
     if main is None:
@@ -99,7 +121,8 @@ def run_lanes(order: list[str], reads: dict, argv_of, jobs: int, expected: dict 
     with tempfile.TemporaryDirectory(prefix="gridcost-lanes-") as tmp:
         try:
             while pending or running:
-                for name in [t for t in pending if _ready(t, reads, done, order)]:
+                for name in startable(pending, [n for n, _ in running.values()],
+                                      lambda t: _ready(t, reads, done, order), alone):
                     if len(running) >= jobs:
                         break
                     pending.remove(name)
