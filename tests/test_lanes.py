@@ -174,3 +174,8 @@ def test_lanes_stop_with_the_run(tmp_path, sig, status):
     while any(_alive(p) for p in pids) and time.time() < deadline:
         time.sleep(0.1)
     assert not any(_alive(p) for p in pids)
+
+
+def test_the_targets_that_run_alone_are_targets_of_all():
+    from experiments.run import ALL_ORDER, ALONE
+    assert ALONE and ALONE <= set(ALL_ORDER)

@@ -19,11 +19,12 @@ Among the targets ready to start, the longest first (their wall time in the last
 :func:`experiments.core.common.expected_seconds`), so the long ones do not end up alone at the end.
 
 Targets in ``alone`` run with no neighbour: one starts only when no other target runs and no other
-target is ready to start, and nothing starts beside it. They are the targets whose results are
-absolute times compared across minutes rather than ratios to a reference timed beside them
-(``advise-check``: a probe's per-ray time against the truth measured minutes later). A neighbour
-changes those times by what it does at that moment: advise-check beside another target met its
-prediction goal on 7 of 16 rows, alone on 14 of 16 (2-core EPYC host).
+target is ready to start, and nothing starts beside it. Pairing a time with a reference timed
+beside it cancels what a neighbour costs only when the neighbour costs both alike; ``alone`` holds
+the targets where it does not (:data:`experiments.run.ALONE` says why for each): absolute times
+compared across minutes (advise-check beside another target met its prediction goal on 7 of 16
+rows, alone on 10 and 14 of 16), and a kernel that a neighbour's memory traffic slows more than
+its reference (the packets against Embree).
 """
 from __future__ import annotations
 
