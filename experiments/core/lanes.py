@@ -22,9 +22,9 @@ Targets in ``alone`` run with no neighbour: one starts only when no other target
 target is ready to start, and nothing starts beside it. Pairing a time with a reference timed
 beside it cancels what a neighbour costs only when the neighbour costs both alike; ``alone`` holds
 the targets where it does not (:data:`experiments.run.ALONE` says why for each): absolute times
-compared across minutes (advise-check beside another target met its prediction goal on 7 of 16
-rows, alone on 10 and 14 of 16), and a kernel that a neighbour's memory traffic slows more than
-its reference (the packets against Embree).
+compared across minutes (advise-check met its prediction goal on 7 of 16 rows beside another
+target, on 10 of 16 alone; same kernels and host), and a kernel that a neighbour's memory traffic
+slows more than its reference (the packets against Embree).
 """
 from __future__ import annotations
 
