@@ -300,3 +300,43 @@ def test_kdtree_rays_lying_in_split_planes(name, placement):
     hits, _ = a.intersect(o, d)
     res = assert_agrees_exactly(hits, ref, ties, (name, placement))
     assert res["hits"] > m // 4, res
+
+
+def test_padded_bounds_contain_the_triangle_and_a_pad_in_space():
+    """The BVHs' boxes (tracer.accel.geometry.padded_bounds): float32, outside the exact bounds by
+    BOX_PAD_REL of the scene's largest magnitude or more, also where a bound is a subnormal, and by
+    no more than one float32 step beyond it."""
+    from tracer.accel.geometry import BOX_PAD_REL, box_pad, padded_bounds
+    tris = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+                     [[0, 1e-4, 0], [0, 1.1210387714598537e-44, 0], [1e-10, 5e-5, 0]],  # a subnormal vertex
+                     [[-2, -1, 0.5], [2, 1, 0.25], [1, -1, 0.5]],                  # exponent boundaries
+                     [[0, 0, 0]] * 3], np.float32)
+    box = np.array([-2.0, -1.0, 0.0, 2.0, 1.0, 0.5])
+    assert box_pad(box) == 2.0 * 2.0 ** -21 == BOX_PAD_REL * 2
+    lo, hi = padded_bounds(tris, box)
+    assert lo.dtype == np.float32 and hi.dtype == np.float32 and lo.shape == (4, 3)
+    exact_lo, exact_hi = tris.min(axis=1).astype(np.float64), tris.max(axis=1).astype(np.float64)
+    pad = 2.0 ** -20
+    assert (exact_lo - lo >= pad).all() and (hi - exact_hi >= pad).all()
+    assert (exact_lo - lo <= pad + np.spacing(np.abs(lo))).all()
+    assert (hi - exact_hi <= pad + np.spacing(np.abs(hi))).all()
+    assert lo[1, 1] == np.float32(-pad) and hi[3, 2] == np.float32(pad)
+    # far from the origin the pad is a float32 step or more of the coordinates there
+    far = tris[:1] + np.float32(1e5)
+    flo, fhi = padded_bounds(far, np.array([1e5, 1e5, 1e5, 1e5 + 1, 1e5 + 1, 1e5]))
+    assert fhi[0, 0] - np.float64(1e5 + 1) >= (1e5 + 1) * 2.0 ** -21 and fhi[0, 0] - (1e5 + 1) < 0.06
+
+
+def test_kdtree_visits_both_children_within_the_pad_of_a_split_plane():
+    """A ray along +x in the plane y = 1 descending at d_y = -1e-30 meets a triangle whose lowest
+    vertex is on y = 1 by ray_triangle's rounding (exactly it passes below it); the kd-tree's split
+    there puts the triangle above and the ray below after t = 0, and the band of box_pad around
+    the plane sends it to both children: the oracle's hit, t = 2, on every kd-tree build."""
+    tris = np.array([[[0, 2, 0], [0, 1, 1], [0, 1, 0]], [[0, 0, 0]] * 3], np.float32)
+    sc = Scene(tris, "kd-band")
+    o, d = np.float32([[-2.0, 1.0, 0.0]]), np.float32([[1.0, -1e-30, 0.0]])
+    ref, _ = oracle_intersect(sc, o, d)
+    assert ref.tri_id[0] == 0 and ref.t[0] == 2.0
+    for kw in ({}, {"clip": True}, {"max_prims": 0}):
+        hits, _ = build(sc, "kdtree", **kw).intersect(o, d, counters=False)
+        assert hits.tri_id[0] == 0 and hits.t[0] == 2.0, kw

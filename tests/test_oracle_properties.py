@@ -38,7 +38,6 @@ from _hypothesis_profiles import profile
 from conftest import assert_agrees_exactly
 from hypothesis import assume, event, given, note
 from hypothesis import strategies as st
-from hypothesis.errors import InvalidArgument
 
 from tracer.accel import Hits, build
 from tracer.accel.grid import grid_params
@@ -401,67 +400,12 @@ def _detail(case, hits, ref, bad):
     return "\n".join(lines)
 
 
-# ---------------------------------------------------------------- known disagreements
-# Real disagreements the property tests found, kept as strict-xfail regression cases
-# (:data:`REGRESSIONS`, at the end of this file). The property tests leave out only the inputs each
-# one is about, and only for the structures it concerns (:func:`known_issue`), so the rest of the
-# inputs keep testing those structures.
-
-#: a direction component this small relative to the largest (but not zero) makes a ray "nearly
-#: axis-parallel"; the oracle's spurious hits of the known bug occur up to about 1e-16
-NEARLY_PARALLEL = 1e-12
-#: the structures the known bug concerns (node tests in t)
-HIERARCHIES = ("kdtree", "bvh", "bvh4", "wbvh")
+# ---------------------------------------------------------------- every input, every structure
+# Real disagreements the property tests found are kept as regression cases (:data:`REGRESSIONS`, at
+# the end of this file); none is left out of the property tests.
 
 
-def nearly_axis_parallel(directions) -> np.ndarray:
-    """The rays of the known bug (:data:`REGRESSIONS`): a direction component nonzero but below
-    NEARLY_PARALLEL of the largest. Returns the mask of such rays."""
-    a = np.abs(directions.astype(np.float64))
-    return ((a > 0) & (a < NEARLY_PARALLEL * a.max(axis=1, keepdims=True))).any(axis=1)
-
-
-def _event(text):
-    """:func:`hypothesis.event` inside a Hypothesis test, nothing outside one."""
-    try:
-        event(text)
-    except InvalidArgument:
-        pass
-
-
-def beside_the_box(scene, origins, directions) -> np.ndarray:
-    """The rays of the known bug's exactly axis-parallel form (:data:`REGRESSIONS`): a direction
-    component exactly zero with the origin outside the oracle's hit triangle's bounding box on that
-    axis. Exactly, such a ray cannot meet the triangle; ``ray_triangle``'s float64 rounding still
-    reports the hit when it passes a vertex by less than its rounding (a subnormal here), and a
-    hierarchy's box test, exact in float32, culls it. Returns the mask of such rays."""
-    ref, _ = oracle_intersect(scene, origins, directions)
-    hit = ref.tri_id >= 0
-    tri = scene.tris[np.maximum(ref.tri_id, 0)].astype(np.float64)
-    lo, hi = tri.min(axis=1), tri.max(axis=1)
-    o = origins.astype(np.float64)
-    out = (directions == 0) & ((o < lo) | (o > hi))
-    return hit & out.any(axis=1)
-
-
-def known_issue(name, scene, case):
-    """(skip the variant, mask of the rays compared) for structure ``name`` on this case: the
-    inputs of the known bug, for the structures it concerns, and nothing else."""
-    keep = np.ones(len(case.origins), bool)
-    if name not in HIERARCHIES:
-        return False, keep
-    near = nearly_axis_parallel(case.directions)
-    if near.any():
-        _event("known bug: nearly axis-parallel rays left out for the hierarchies")
-        keep &= ~near
-    beside = beside_the_box(scene, case.origins, case.directions)
-    if beside.any():
-        _event("known bug: axis-parallel rays beside the hit triangle's box left out for the hierarchies")
-        keep &= ~beside
-    return False, keep
-
-
-def check_family(family, case, variants=None, skip_known=True):
+def check_family(family, case, variants=None):
     """Build every variant of ``family`` on the case's scene and compare with the oracle; raise one
     AssertionError listing every variant that disagrees."""
     tris = case.tris
@@ -475,25 +419,21 @@ def check_family(family, case, variants=None, skip_known=True):
         event("rays with ties at the closest hit")
     failures = []
     for label, name, params in (variants or FAMILIES[family]):
-        skip, keep = known_issue(name, scene, case) if skip_known else (False, np.ones(len(ties), bool))
-        if skip:
-            continue
         kw = _params(params, case)
         acc = build(scene, name, **kw)
         hits, _ = acc.intersect(case.origins, case.directions, counters=False)
         try:
-            assert_agrees_exactly(Hits(hits.t[keep], hits.tri_id[keep]), Hits(ref.t[keep], ref.tri_id[keep]),
-                                  ties[keep], (name, label))
+            assert_agrees_exactly(hits, ref, ties, (name, label))
         except AssertionError as exc:
             hit_a, hit_b = hits.tri_id >= 0, ref.tri_id >= 0
             same = hit_a & (hits.tri_id == ref.tri_id)
             with np.errstate(over="ignore"):
-                bad = np.flatnonzero(keep & ((hit_a != hit_b) | (hit_a & hit_b & ~same & (ties == 0))
+                bad = np.flatnonzero(((hit_a != hit_b) | (hit_a & hit_b & ~same & (ties == 0))
                                              | (same & (hits.t != ref.t.astype(np.float32)))))
             failures.append(f"{name} {kw}: {exc}\n{_detail(case, hits, ref, bad)}")
             continue
         occ = acc.occluded(case.origins, case.directions, None)
-        bad = np.flatnonzero(keep & (occ != (ref.tri_id >= 0)))
+        bad = np.flatnonzero(occ != (ref.tri_id >= 0))
         if len(bad):
             failures.append(f"{name} {kw}: occluded() disagrees with hit/miss on rays {bad[:10].tolist()}\n"
                             f"{_detail(case, hits, ref, bad)}")
@@ -552,9 +492,6 @@ def _agrees(scene, name, params, o, d):
     assert_agrees_exactly(hits, ref, ties, (name, params))
 
 
-_BUG2 = pytest.mark.xfail(strict=True, reason="known bug: kd-tree/BVH/BVH4 miss the oracle's hit of a nearly "
-                                             "axis-parallel ray leaving a node box face or split plane, or of an "
-                                             "axis-parallel ray a rounding away from a triangle's box")
 #: the structures of the regression cases, with the parameters the shrunk cases used
 REGRESSION_STRUCTURES = {
     "grid-res": ("grid", dict(res=(2, 2, 1))), "grid-auto": ("grid", {}), "nested": ("nested", dict(levels=2)),
@@ -562,7 +499,7 @@ REGRESSION_STRUCTURES = {
     "kdtree": ("kdtree", {}), "kdtree-clip": ("kdtree", dict(clip=True)), "bvh": ("bvh", {}), "bvh4": ("bvh4", {}),
     "wbvh": ("wbvh", dict(width=8)), "sortedlists": ("sortedlists", {})}
 
-#: case -> (triangles, origins, directions, {structure label: the mark of the known bug it shows}).
+#: case -> (triangles, origins, directions); every structure must agree with the oracle on each.
 #:
 #: FIXED (``tracer.scenes.scenetype.scene_bounds``, found here): the flat-axis pad and the margin
 #: were added in float64 and the box rounded to nearest float32, so far from the origin they
@@ -577,13 +514,15 @@ REGRESSION_STRUCTURES = {
 #:   d_x = -1.4e-45 hits it at t = 7.1e40 in float64; every structure returns float32 t = inf with
 #:   the right id, and the comparison used the unrounded t. The oracle's t is now compared rounded
 #:   to float32, as the structures return it.
-#: KNOWN BUG (the hierarchies' node tests in t: ``tracer.accel.kdtree``, ``bvh``, ``bvh4``): a ray
+#: FIXED (the hierarchies' boxes: ``tracer.accel.geometry.padded_bounds``, found here): a ray
 #: starting in the plane of a node box face or split plane and leaving it with a direction
 #: component in (0, ~1e-16] of the others meets a vertex or edge on that plane by
 #: ``ray_triangle``'s float64 rounding (exactly it would leave at t = 0 and miss); the oracle counts
-#: the hit, the grids (with a margin) and sorted lists find it, the kd-tree, BVH and BVH4 put it
-#: outside the node (one ulp in x is ulp/d_x in t, far beyond T_EPS). Any scale, at the origin too
-#: ("nearly-parallel-two-triangles": BVH and BVH4 miss for d_z from 3e-39 to 1e-16).
+#: the hit, the grids (with a margin) and sorted lists found it, the kd-tree, BVH, BVH4 and wide BVH
+#: put it outside the node (one ulp in x is ulp/d_x in t, far beyond T_EPS). Any scale, at the
+#: origin too ("nearly-parallel-two-triangles": BVH and BVH4 missed for d_z from 3e-39 to 1e-16).
+#: Every box the hierarchies cull by is now padded in space (BOX_PAD_REL of the triangle's
+#: magnitude), which no widening in t could do.
 #: * "nearly-parallel-shrunk-bvh" (shrunk): a degenerate triangle at the origin and a 1e-4 right
 #:   triangle; the ray starts on its box face x = 1e-4 below vertex (1e-4, 0, 0) and rises along z
 #:   with a subnormal x component: the oracle hits triangle 1 at t = 1.4142432e-4, BVH misses
@@ -596,66 +535,47 @@ REGRESSION_STRUCTURES = {
 #:   -1.4e-45): the oracle hits the vertex at t = 2, the kd-tree (every build), BVH and BVH4 miss
 #:   (kd-tree misses for |d_y| from 1e-45 to 1e-17; without the degenerate triangle it agrees).
 #: * "axis-ray-beside-a-subnormal-vertex" (from a shrunk case of the long profile): the same in its
-#:   exactly axis-parallel form (:func:`beside_the_box`). A sliver in the plane z = 0 with its lowest
+#:   exactly axis-parallel form. A sliver in the plane z = 0 with its lowest
 #:   vertex at y = 1.1e-44; the ray along +z at x = y = 0 passes it by that subnormal, which
 #:   ``ray_triangle``'s float64 rounding loses beside the 1e-4 edges: the oracle hits at
-#:   t = 2.5e-5; the kd-tree (every build), BVH and BVH4 cull the triangle's box (the grids' margin
-#:   and sorted lists find it).
+#:   t = 2.5e-5; the kd-tree (every build), BVH and BVH4 culled the triangle's box (the grids' margin
+#:   and sorted lists found it).
 _UNIT = np.array([[[0, 0, 0], [1, 0, 0], [0, 0, 1]], [[0, 0.5, 0], [1, 0.5, 0], [0, 0.5, 1]]], np.float32)
 REGRESSIONS = {
     "flat-0.01-square-at-1e3": (
         np.array([[[0, 0, 1e3], [1e-2, 0, 1e3], [0, 1e-2, 1e3]], [[1e-2, 0, 1e3], [1e-2, 1e-2, 1e3], [0, 1e-2, 1e3]]],
-                 np.float32), [[0.005, 0.005, 1001.0]], [[0.0, 0.0, -1.0]], {}),
+                 np.float32), [[0.005, 0.005, 1001.0]], [[0.0, 0.0, -1.0]]),
     "flat-unit-triangle-at-1e5": (
-        np.array([[[0, 0, 1e5], [1, 0, 1e5], [0, 1, 1e5]]], np.float32), [[0.2, 0.2, 100001.0]], [[0.0, 0.0, -1.0]], {}),
+        np.array([[[0, 0, 1e5], [1, 0, 1e5], [0, 1, 1e5]]], np.float32), [[0.2, 0.2, 100001.0]], [[0.0, 0.0, -1.0]]),
     "margin-shrunk-grid": (
-        np.array([[[0, 0, 1], [1e-4, 0, 1], [0, 0, 1.0001]]], np.float32), [[0.0, -2.0, 1.0001]], [[0.0, 1.0, 1e-30]],
-        {"bvh4": _BUG2, "wbvh": _BUG2}),
+        np.array([[[0, 0, 1], [1e-4, 0, 1], [0, 0, 1.0001]]], np.float32), [[0.0, -2.0, 1.0001]], [[0.0, 1.0, 1e-30]]),
     "margin-unit-at-1e5": (
-        _UNIT + np.float32([0, 0, 1e5]), [[0.0, -2.0, 1e5 + 1]], [[0.0, 1.0, 1e-30]],
-        {"bvh": _BUG2, "bvh4": _BUG2, "wbvh": _BUG2}),
-    "nearly-parallel-two-triangles": (_UNIT, [[0.0, -2.0, 1.0]], [[0.0, 1.0, 1e-30]],
-                                      {"bvh": _BUG2, "bvh4": _BUG2, "wbvh": _BUG2}),
+        _UNIT + np.float32([0, 0, 1e5]), [[0.0, -2.0, 1e5 + 1]], [[0.0, 1.0, 1e-30]]),
+    "nearly-parallel-two-triangles": (_UNIT, [[0.0, -2.0, 1.0]], [[0.0, 1.0, 1e-30]]),
     "nearly-parallel-shrunk-bvh": (
         np.array([[[0, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [1e-4, 0, 0], [0, 1e-4, 0]]], np.float32),
-        [[9.999999747378752e-05, 0.0, -0.00014142431609798223]], [[1.807675018979014e-43, 0.0, 1.0]], {"bvh": _BUG2}),
+        [[9.999999747378752e-05, 0.0, -0.00014142431609798223]], [[1.807675018979014e-43, 0.0, 1.0]]),
     "nearly-parallel-shrunk-kdtree": (
         np.array([[[0, 5e-5, 0]] * 3] * 8 + [[[0, 1e-4, 0], [0, 5e-5, 5e-5], [0, 5e-5, 0]]] + [[[0, 0, 0]] * 3] * 2,
-                 np.float32), [[-2.0, 4.999999873689376e-05, 0.0]], [[1.0, -1.401298464324817e-45, 0.0]],
-        {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2}),
+                 np.float32), [[-2.0, 4.999999873689376e-05, 0.0]], [[1.0, -1.401298464324817e-45, 0.0]]),
     "nearly-parallel-kdtree-unit": (
         np.array([[[0, 2, 0], [0, 1, 1], [0, 1, 0]], [[0, 0, 0]] * 3], np.float32), [[-2.0, 1.0, 0.0]],
-        [[1.0, -1e-30, 0.0]], {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2, "bvh4": _BUG2}),
+        [[1.0, -1e-30, 0.0]]),
     "subnormal-direction-beyond-float32": (
         np.array([[[1e-4, 0, 0]] * 3] * 6 + [[[0, 0, 0], [0, 1e-4, 0], [0, 0, 1e-4]]], np.float32),
-        [[9.999999747378752e-05, 0.0, 0.0]], [[-1.401298464324817e-45, 0.0, 0.0]], {}),
+        [[9.999999747378752e-05, 0.0, 0.0]], [[-1.401298464324817e-45, 0.0, 0.0]]),
     "axis-ray-beside-a-subnormal-vertex": (
         np.array([[[0, 0, 0]] * 3, [[0, 1e-4, 0]] * 3, [[0, 1e-4, 0], [0, 1.1210387714598537e-44, 0], [1e-10, 5e-5, 0]]],
-                 np.float32), [[0.0, 0.0, -2.5000601453939453e-05]], [[0.0, 0.0, 1.0]],
-        {"kdtree": _BUG2, "kdtree-clip": _BUG2, "bvh": _BUG2, "bvh4": _BUG2}),
+                 np.float32), [[0.0, 0.0, -2.5000601453939453e-05]], [[0.0, 0.0, 1.0]]),
     "nearly-parallel-one-triangle": (
-        np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), [[1.0, 0.0, -1.0]], [[1e-20, 0.0, 1.0]],
-        {"bvh4": _BUG2, "wbvh": _BUG2}),
+        np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32), [[1.0, 0.0, -1.0]], [[1e-20, 0.0, 1.0]]),
 }
 
 
-@pytest.mark.parametrize("case,structure", [
-    pytest.param(c, lab, marks=[REGRESSIONS[c][3][lab]] if lab in REGRESSIONS[c][3] else [], id=f"{c}-{lab}")
-    for c in REGRESSIONS for lab in REGRESSION_STRUCTURES])
+@pytest.mark.parametrize("case,structure", [(c, lab) for c in REGRESSIONS for lab in REGRESSION_STRUCTURES])
 def test_regression_cases(case, structure):
-    """Every structure on every regression case; the known bugs are strict xfails (an XPASS, once a
-    bug is fixed, fails the suite until its mark and its exemption in :func:`known_issue` go)."""
-    tris, o, d, _ = REGRESSIONS[case]
+    """Every structure on every regression case."""
+    tris, o, d = REGRESSIONS[case]
     name, params = REGRESSION_STRUCTURES[structure]
     scene = Scene(tris, case, "regression", validate(tris, case))
     _agrees(scene, name, params, o, d)
-
-
-def test_regression_premises():
-    """:func:`known_issue` leaves out the regression cases' inputs for the structures they fail."""
-    for case, (tris, o, d, bugs) in REGRESSIONS.items():
-        scene = Scene(tris, case)
-        c = Case(tris, (2, 2, 1), 2, np.float32(o), np.float32(d), 0, 1.0, (0.0, 0.0, 0.0))
-        for lab in bugs:
-            skip, keep = known_issue(REGRESSION_STRUCTURES[lab][0], scene, c)
-            assert skip or not keep.any(), (case, lab)

@@ -36,7 +36,7 @@ from numba import prange
 from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, store_ray
 from tracer.accel import TreeTraceMixin, COUNTER_NAMES, Accel
 from tracer.errors import GridcostError
-from tracer.accel.geometry import INF, load_ray, ray_triangle, t_tolerance
+from tracer.accel.geometry import INF, load_ray, padded_bounds, ray_triangle, t_tolerance
 from tracer.accel.kdtree import root_box
 from tracer.accel.pages import traversal_array, traversal_rows
 from tracer.measure.memory import check_budget, working_set
@@ -368,8 +368,10 @@ class BVH(TreeTraceMixin, Accel):
             self.leaves_, self.depth_, self.sah_ = 0, 0, {"exp_inner": 0.0, "exp_tests": 0.0}
             self.diag_, self.build_seconds_ = 0.0, time.perf_counter() - t_start
             return self
-        pb = np.concatenate([tris.min(axis=1), tris.max(axis=1)], axis=1)
-        pc = 0.5 * (pb[:, :3].astype(np.float64) + pb[:, 3:].astype(np.float64))
+        # centroids from the exact bounds (the tree's splits), node boxes from the padded ones
+        pc = 0.5 * (tris.min(axis=1).astype(np.float64) + tris.max(axis=1).astype(np.float64))
+        self.box_ = root_box(scene)
+        pb = np.concatenate(padded_bounds(tris, self.box_), axis=1)
         B, info, order, nleaves, depth, s_inner, s_tests, root_area = bvh_build(
             pb, pc, int(self.bins), int(self.max_leaf), float(self.trav_cost))
         nodes = np.empty((len(B), 8), np.int32)
@@ -382,7 +384,6 @@ class BVH(TreeTraceMixin, Accel):
         self.tri_ids_ = order
         self.tri_verts_ = traversal_rows(tris.reshape(-1, 9), order)
         self.build_seconds_ = time.perf_counter() - t_start
-        self.box_ = root_box(scene)
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
         self.leaves_, self.depth_ = int(nleaves), int(depth)
         ra = root_area if root_area > 0 else np.nan

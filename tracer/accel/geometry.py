@@ -71,6 +71,41 @@ def ray_triangle(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, cx, cy, cz, tmi
 T_EPS = 2e-6
 
 
+#: the hierarchies' pad in space, relative to the scene's largest coordinate magnitude
+#: (:func:`box_pad`). ray_triangle's float64 rounding reports hits a little outside the exact
+#: triangle (a ray passing a vertex or edge by a subnormal, or leaving the triangle's plane at a
+#: direction component of 1e-30); such a point lies outside the exact bounds, and for a nearly
+#: axis-parallel ray one float32 step in space is far more than any widening in t (``T_EPS``).
+#: 2^-21 is 2-4 float32 steps of the magnitude, ~2^31 times the float64 rounding near the scene,
+#: and on real meshes (extent >> 1e-6 of the coordinates) it moves no box by a visible amount.
+BOX_PAD_REL = 2.0 ** -21
+
+
+@jit(inline="always")
+def box_pad(box):
+    """The pad in space of a scene with root box ``box`` (6 float64: lo, hi): BOX_PAD_REL of its
+    largest coordinate magnitude. The BVHs' node boxes are built padded by it
+    (:func:`padded_bounds`); the kd-tree visits both children of a split plane while a ray is
+    within it of the plane."""
+    m = 0.0
+    for k in range(6):
+        m = max(m, abs(box[k]))
+    return BOX_PAD_REL * m
+
+
+def padded_bounds(tris, box):
+    """Each triangle's bounds (lo, hi: (N, 3) float32) widened by :func:`box_pad` of the root box
+    ``box`` and rounded outward: the boxes the BVHs build from, so a hit ray_triangle reports by
+    rounding just outside a triangle is never culled by its box."""
+    v = tris.astype(np.float64)
+    pad = box_pad(np.asarray(box, np.float64))
+    lo, hi = v.min(axis=1) - pad, v.max(axis=1) + pad
+    flo, fhi = lo.astype(np.float32), hi.astype(np.float32)
+    flo = np.where(flo.astype(np.float64) > lo, np.nextafter(flo, np.float32(-np.inf)), flo)
+    fhi = np.where(fhi.astype(np.float64) < hi, np.nextafter(fhi, np.float32(np.inf)), fhi)
+    return flo, fhi
+
+
 @jit(inline="always")
 def load_ray(O, D, i):
     """Ray ``i`` exactly as the grid and the oracle pass it to :func:`ray_triangle` (widened with

@@ -40,7 +40,7 @@ from numba import prange
 from tracer.accel import Accel, TreeTraceMixin
 from tracer.accel._jit import BLOCK, jit, nblocks, pjit, pop_within, ray_jit, store_ray
 from tracer.accel.bvh import bvh_build, ray_start
-from tracer.accel.geometry import INF, t_tolerance
+from tracer.accel.geometry import INF, padded_bounds, t_tolerance
 from tracer.accel.kdtree import root_box
 from tracer.accel.pages import traversal_array
 from tracer.accel.simd import ctz, popc, prefetch, slab4, slab8, slabq4, slabq8
@@ -497,8 +497,10 @@ class WideBVH(TreeTraceMixin, Accel):
             self.build_seconds_ = time.perf_counter() - t_start
             return self
         tris = scene.tris
-        pb = np.concatenate([tris.min(axis=1), tris.max(axis=1)], axis=1)
-        pc = 0.5 * (pb[:, :3].astype(np.float64) + pb[:, 3:].astype(np.float64))
+        # centroids from the exact bounds (the tree's splits), node boxes from the padded ones
+        pc = 0.5 * (tris.min(axis=1).astype(np.float64) + tris.max(axis=1).astype(np.float64))
+        self.box_ = root_box(scene)
+        pb = np.concatenate(padded_bounds(tris, self.box_), axis=1)
         nb, info, order, nleaves, _, _, _, _ = bvh_build(pb, pc, int(self.bins), int(self.max_leaf),
                                                          float(self.trav_cost), WIDE_BLOCK)
         tv = np.ascontiguousarray(tris.reshape(-1, 9)[order])
@@ -510,7 +512,6 @@ class WideBVH(TreeTraceMixin, Accel):
         # the layout traced: the float records, or the same tree quantised (one byte a plane)
         self.qnodes_ = traversal_array(quantize(nodes, w, NORD)) if self.boxes == "quant" else None
         self.depth_, self.leaves_ = int(depth), int(nleaves)
-        self.box_ = root_box(scene)
         self.diag_ = float(np.linalg.norm(self.box_[3:] - self.box_[:3]))
         self.build_seconds_ = time.perf_counter() - t_start
         return self
