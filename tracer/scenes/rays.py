@@ -6,7 +6,7 @@
   ``teapot-in-stadium``; else its bounding sphere), W x H.
 * ``path`` — camera rays plus k cosine-weighted diffuse bounces from their hit points.
 * ``adversarial`` — axis-aligned, exactly along cell planes, through vertices and edges, starting
-  inside cells and on the boundary, parallel to faces.
+  inside cells and on the boundary, parallel to faces, nearly axis-parallel in a vertex's plane.
 """
 from __future__ import annotations
 
@@ -164,14 +164,15 @@ def path_rays(scene, n: int, bounces: int = 2, seed: int = 0, accel=None) -> Ray
 def adversarial_rays(scene, n: int, seed: int = 0, res=None) -> Rays:
     """Rays built to break traversal: axis-aligned (from outside and from inside), exactly along the
     cell planes of a grid of resolution ``res`` (default: the 8N cube-cell grid), through vertices,
-    through points on edges, starting inside cells and on the box boundary, and parallel to faces."""
+    through points on edges, starting inside cells and on the box boundary, parallel to faces, and
+    nearly axis-parallel past a vertex."""
     from tracer.accel.grid import res_from_cells
     rng = np.random.default_rng(seed)
     lo, hi = scene.bounds.astype(np.float64)
     ext = hi - lo
     c, r = bounding_sphere(scene)
     res = np.asarray(res if res is not None else res_from_cells(scene.bounds, 8 * scene.n))
-    k = max(1, n // 8)
+    k = max(1, n // 9)
     V = scene.tris.astype(np.float64)
     O, D = [], []
     # 1. axis-aligned rays from outside the box, +/- each axis
@@ -226,8 +227,23 @@ def adversarial_rays(scene, n: int, seed: int = 0, res=None) -> Rays:
     ok = np.linalg.norm(e1, axis=1) > 0
     d = np.where(ok[:, None], e1, _sphere_points(rng, k))
     O.append(cen - d * 2.0); D.append(d)
-    # 8. axis-aligned rays starting inside cells (origin inside, +/- axis)
-    rest = n - 7 * k
+    # 8. nearly axis-parallel in a vertex's coordinate plane: along axis b from outside the box,
+    # leaving the plane o_a = v_a at a direction component of 1e-45..1e-8 (a subnormal in float32
+    # at the low end). Exactly the ray passes the vertex, by rounding ray_triangle may hit it: the
+    # trap of the hierarchies' boxes and split planes (tracer.accel.geometry.box_pad)
+    tri = rng.integers(0, scene.n, k)
+    v = V[tri, rng.integers(0, 3, k)]
+    b = rng.integers(0, 3, k)
+    a = (b + rng.integers(1, 3, k)) % 3
+    sign = rng.choice([-1.0, 1.0], k)
+    o = v.copy()
+    o[np.arange(k), b] = np.where(sign > 0, lo[b] - 0.1 * ext[b] - 1e-3, hi[b] + 0.1 * ext[b] + 1e-3)
+    d = np.zeros((k, 3))
+    d[np.arange(k), b] = sign
+    d[np.arange(k), a] = rng.choice([-1.0, 1.0], k) * 10.0 ** rng.uniform(-45, -8, k)
+    O.append(o); D.append(d)
+    # 9. axis-aligned rays starting inside cells (origin inside, +/- axis)
+    rest = n - 8 * k
     o = lo + rng.random((rest, 3)) * ext
     d = np.zeros((rest, 3))
     d[np.arange(rest), rng.integers(0, 3, rest)] = rng.choice([-1.0, 1.0], rest)
