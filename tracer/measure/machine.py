@@ -28,7 +28,7 @@ import numpy as np
 
 from tracer.accel._jit import jit
 from tracer.measure.memory import cache_bytes
-from tracer.measure.provenance import cpu_model, host
+from tracer.measure.provenance import cpu_model, host, host_cpu_features
 from tracer.measure.timing import clock_name, default_clock
 from tracer.storage import atomic_write
 
@@ -92,14 +92,11 @@ def stream_gbs(nbytes: int, repeats: int = 3) -> float:
 
 
 def doubles_per_vector() -> int:
-    """float64 lanes in one vector register of this CPU, as LLVM reports its features: 8 with
-    AVX-512, 4 with AVX, else 2 (the packet test's ``<8 x double>`` takes 8 / this many instructions)."""
-    try:
-        import llvmlite.binding as llvm
-        f = llvm.get_host_cpu_features()
-    except Exception:  # no llvmlite host query: say the SSE2 width every x86-64 has
-        return 2
-    return 8 if f.get("avx512f", False) else (4 if f.get("avx", False) else 2)
+    """float64 lanes in one vector register of this CPU (:func:`tracer.measure.provenance.host_cpu_features`):
+    8 with AVX-512, 4 with AVX, else the SSE2 width every x86-64 has, 2 (the packet test's
+    ``<8 x double>`` takes 8 / this many instructions)."""
+    f = host_cpu_features()
+    return 8 if "avx512f" in f else (4 if "avx" in f else 2)
 
 
 def machine_dir() -> Path:

@@ -188,18 +188,24 @@ def cpu_model() -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def bvh_width() -> int:
-    """Children per node of the wide BVH (:mod:`tracer.accel.wide_bvh`) on this CPU: 8 when LLVM reports
-    AVX2 for the host (``<8 x float>`` is one register), else 4; /proc/cpuinfo when llvmlite cannot tell."""
+def host_cpu_features() -> frozenset:
+    """The CPU features LLVM reports for this host that are on (``avx``, ``avx2``, ``avx512f``...);
+    the flags of /proc/cpuinfo when llvmlite cannot tell, empty when neither can."""
     try:
         import llvmlite.binding as llvm
-        return 8 if llvm.get_host_cpu_features().get("avx2", False) else 4
+        return frozenset(k for k, on in llvm.get_host_cpu_features().items() if on)
     except Exception:
         try:
             with open("/proc/cpuinfo") as f:
-                return 8 if " avx2" in f.read() else 4
+                return frozenset(w for line in f if line.startswith("flags") for w in line.split(":", 1)[1].split())
         except OSError:
-            return 4
+            return frozenset()
+
+
+def bvh_width() -> int:
+    """Children per node of the wide BVH (:mod:`tracer.accel.wide_bvh`) on this CPU: 8 when the host
+    has AVX2 (``<8 x float>`` is one register), else 4."""
+    return 8 if "avx2" in host_cpu_features() else 4
 
 
 def host() -> str:
