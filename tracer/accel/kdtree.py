@@ -141,15 +141,14 @@ def _kd_next(nxt, hi, O, D, tmin, tmax, box, diag, rs, out_t, out_id, counters):
             # the band around a split plane where a hit may lie on either side (box_pad): its
             # half-width in t on each axis (w; wide for a nearly axis-parallel ray), the same
             # plus 2 tol (the children's ranges end that far beyond the plane), and its
-            # half-width in space (rays parallel to the plane)
-            u = box_pad(box)
+            # half-width in space (rays parallel to the plane: box_pad, set once by kd_chunk)
+            u = rs[15]
             rs[9] = abs(u * ix)
             rs[10] = abs(u * iy)
             rs[11] = abs(u * iz)
             rs[12] = rs[9] + (tol + tol)
             rs[13] = rs[10] + (tol + tol)
             rs[14] = rs[11] + (tol + tol)
-            rs[15] = u
             # the node's t-range is kept widened by tol on both sides (ntmin - tol, ntmax + tol),
             # so a plane distance is compared as computed, with no add on the node-to-node chain
             return i, nxt, best, t0 - tol, t1 + tol
@@ -305,6 +304,7 @@ def kd_chunk(lo, hi, O, D, tmin, tmax, anyhit, box, diag, nodes, nodes_f, tv, bl
     s0a = np.empty(stack_size, np.float64)
     s1a = np.empty(stack_size, np.float64)
     rb = np.empty(16, np.float64)
+    ra[15] = rb[15] = box_pad(box)  # the band's half-width in space: one per structure (see _kd_next)
     snb = np.empty(stack_size, np.int32)
     s0b = np.empty(stack_size, np.float64)
     s1b = np.empty(stack_size, np.float64)

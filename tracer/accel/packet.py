@@ -23,7 +23,11 @@ packets, each thread with its own work arrays):
    replaced), each with its own frustum bounds, and a triangle is tested only on the groups whose
    frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8 packet):
    one vector compare per bound gives the bitmask of those groups. Every test keeps a margin far
-   above rounding, so culling never drops a hit.
+   above rounding, so culling never drops a hit. A slice runs in phases (``_slice_cells``,
+   ``_gather``): its occupied cells are listed without a branch per cell, their references
+   gathered in batches of BATCH and mailboxed, and only then loaded, culled and tested, the vertex
+   rows prefetched TV_AHEAD references ahead; the order of the tests is the cell-by-cell order, so
+   the hits are the same, and the loads of one phase no longer wait on the tests of the last.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the
@@ -43,7 +47,8 @@ slices = nodes, mailbox + culling skips) are spread evenly over the packet's ray
 returns per-packet arrays (:data:`PACKET_COUNTERS`), among them the tests without mailboxing, with
 mailboxing and with mailboxing + culling of the whole packet, all from one traversal (hits, and so
 the traversal, do not depend on either technique), and the tests the variant did (with culling on,
-fewer: the group frusta).
+fewer: the group frusta). Mailbox skips count whole batches: an any-hit packet that ends within a
+batch has already gathered and stamped the rest of it.
 
 Files: this module has the packet loop (:func:`_packets`), the batched kernel and the structure;
 the loop's building blocks (work-array rows, the SIMD triangle test of step 4, the frustum and the
@@ -67,10 +72,10 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, LANES, _cells, _compact, _culled, _frame, _frustum,
-    _max,
-    _min, _needs, _retire, _span, _spread, _test_tri,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, TV_AHEAD, _FL, _RL, _TL, _cells, _compact,
+    _culled, _frame, _frustum, _gather, _max, _min, _needs, _retire, _slice_cells, _span, _spread, _test_tri,
 )
+from tracer.accel.simd import prefetch
 
 NCOUNT = len(COUNTER_NAMES)
 #: per-packet counter columns of :meth:`CoherentGrid.packet_counters`; tests_* are ray-triangle
@@ -199,10 +204,11 @@ def _sort(b, cnt, any_in, tmin, tmax, gp, K, U, V, sig, W, I):
 # ---------------------------------------------------------------- the packet loop
 @jit
 def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tri_ids, tv, macro, M,
-             mailbox, cull, stamps, W, I, out_t, out_id, counters, pc):
+             mailbox, cull, stamps, W, I, CL, L, out_t, out_id, counters, pc):
     """Trace packets [p0, p1) one after the other on this thread's work arrays (one call per chunk
-    of packets: a call per packet costs as much as tracing a packet that misses the grid). A packet
-    is the rays [p k2, (p + 1) k2); rays that cannot join it are traced on their own."""
+    of packets: a call per packet costs as much as tracing a packet that misses the grid; ``CL``
+    holds a slice's occupied cells, ``L`` a batch of references, :func:`_gather`). A packet is the
+    rays [p k2, (p + 1) k2); rays that cannot join it are traced on their own."""
     m = O.shape[0]
     nxg, nyg, nzg = res[0], res[1], res[2]
     GB = W[_GB:_GB + 8]  # the group frusta (tracer.accel.packet_kernels._frustum)
@@ -301,66 +307,61 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 changed = False
                 sbase = j * stK
                 cull_now = cull and n > CULL_MIN_RAYS  # a test of a few rays costs less than culling
-                for iv in range(v0, v1 + 1):
-                    for iu in range(u0, u1 + 1):
-                        c = sbase + iu * stU + iv * stV
-                        cells += 1
-                        if (occb[c >> 3] >> (c & 7)) & 1 == 0:  # an empty cell (bitmask: no cell_start load)
-                            continue
-                        for r in range(cell_start[c], cell_start[c + 1]):
-                            tid = tri_ids[r]
-                            considered += 1
-                            acc_plain += n
-                            first = True
-                            if stamping:
-                                if stamps[tid] == pid:
-                                    first = False
-                                    if mailbox:
-                                        skips += 1
-                                        continue
-                                else:
-                                    stamps[tid] = pid
-                            ax = np.float64(tv[r, 0]); ay = np.float64(tv[r, 1]); az = np.float64(tv[r, 2])
-                            bx = np.float64(tv[r, 3]); by = np.float64(tv[r, 4]); bz = np.float64(tv[r, 5])
-                            cx = np.float64(tv[r, 6]); cy = np.float64(tv[r, 7]); cz = np.float64(tv[r, 8])
-                            fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
-                            if cull_now or counting:
-                                out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
-                                              edge, ox0, oy0, oz0, ru, rv)
-                                if counting and first:
-                                    uniq += 1
-                                    acc_mb += n
-                                    if not out:
-                                        acc_fc += n
-                                if cull_now and out:
-                                    skips += 1
-                                    culled += 1
-                                    continue
-                            # whole vectors of LANES rays; with culling, only the groups whose frusta it may meet
-                            nh, lanes, real = _test_tri(n, cull_now and n > LANES, GB, fv, common, W, I, tid,
-                                                        ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
-                            if lanes == 0:
+                nc = _slice_cells(u0, u1, v0, v1, sbase, stU, stV, occb, cell_start, CL)
+                cells += max(u1 - u0 + 1, 0) * max(v1 - v0 + 1, 0)
+                kc = rcur = rend = 0
+                while n > 0:  # batches of references: gathered, mailboxed, then culled and tested
+                    nk, nr, kc, rcur, rend = _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, L, pid, stamping,
+                                                     mailbox, stamps)
+                    if nr == 0:
+                        break
+                    considered += nr
+                    acc_plain += n * nr
+                    skips += nr - nk
+                    for k in range(min(nk, TV_AHEAD)):
+                        prefetch(tv, np.uintp(L[_RL, k] * 9))
+                    for k in range(nk):
+                        if k + TV_AHEAD < nk:
+                            prefetch(tv, np.uintp(L[_RL, k + TV_AHEAD] * 9))
+                        r = L[_RL, k]
+                        tid = L[_TL, k]
+                        ax = np.float64(tv[r, 0]); ay = np.float64(tv[r, 1]); az = np.float64(tv[r, 2])
+                        bx = np.float64(tv[r, 3]); by = np.float64(tv[r, 4]); bz = np.float64(tv[r, 5])
+                        cx = np.float64(tv[r, 6]); cy = np.float64(tv[r, 7]); cz = np.float64(tv[r, 8])
+                        fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
+                        if cull_now or counting:
+                            out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
+                                          edge, ox0, oy0, oz0, ru, rv)
+                            if counting and L[_FL, k] != 0:
+                                uniq += 1
+                                acc_mb += n
+                                if not out:
+                                    acc_fc += n
+                            if cull_now and out:
                                 skips += 1
                                 culled += 1
                                 continue
-                            acc_lanes += lanes
-                            acc_tests += real
-                            changed = True
-                            if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
-                                _needs(n, True, W, I)
-                                n, retired = _compact(n, -1, W, I, out_t, out_id, counters)
-                                if n == 0:
-                                    break
-                                if retired:
-                                    fr = _frustum(n, W, GB)
-                                    if edge:
-                                        ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
-                                    nlast, nfirst = _span(n, I)
-                                    cull_now = cull and n > CULL_MIN_RAYS
-                        if n == 0:
-                            break
-                    if n == 0:
-                        break
+                        # whole vectors of LANES rays; with culling, only the groups whose frusta it may meet
+                        nh, lanes, real = _test_tri(n, cull_now and n > LANES, GB, fv, common, W, I, tid,
+                                                    ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
+                        if lanes == 0:
+                            skips += 1
+                            culled += 1
+                            continue
+                        acc_lanes += lanes
+                        acc_tests += real
+                        changed = True
+                        if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
+                            _needs(n, True, W, I)
+                            n, retired = _compact(n, -1, W, I, out_t, out_id, counters)
+                            if n == 0:
+                                break
+                            if retired:
+                                fr = _frustum(n, W, GB)
+                                if edge:
+                                    ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
+                                nlast, nfirst = _span(n, I)
+                                cull_now = cull and n > CULL_MIN_RAYS
                 if n == 0:
                     break
                 if changed:  # a ray with a hit needs no slice past its hit's
@@ -405,9 +406,9 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
 
 @pjit
 def cgt_trace(O, D, tmin, tmax, anyhit, k2, gp, res, cell_start, occb, tri_ids, tv, macro, M,
-              mailbox, cull, W, I, stamps, out_t, out_id, counters, pc):
+              mailbox, cull, W, I, CL, L, stamps, out_t, out_id, counters, pc):
     """Batched coherent grid traversal, ``prange`` over chunks of CHUNK packets of ``k2``
-    consecutive rays. ``W``/``I``/``stamps`` are per-thread work arrays; ``counters``/``pc`` arrays
+    consecutive rays. ``W``/``I``/``CL``/``L``/``stamps`` are per-thread work arrays; ``counters``/``pc`` arrays
     or None (None compiles the variant without counting code); ``macro`` the occupancy of M^3
     blocks or None."""
     npk = (O.shape[0] + k2 - 1) // k2
@@ -415,7 +416,8 @@ def cgt_trace(O, D, tmin, tmax, anyhit, k2, gp, res, cell_start, occb, tri_ids, 
     for c in prange(nch):
         thr = numba.get_thread_id()
         _packets(c * CHUNK, min(npk, (c + 1) * CHUNK), k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb,
-               tri_ids, tv, macro, M, mailbox, cull, stamps[thr], W[thr], I[thr], out_t, out_id, counters, pc)
+               tri_ids, tv, macro, M, mailbox, cull, stamps[thr], W[thr], I[thr], CL[thr], L[thr], out_t, out_id,
+               counters, pc)
 
 
 # ---------------------------------------------------------------- structure
@@ -472,9 +474,12 @@ class CoherentGrid(Accel):
         W = np.zeros((nthr, _GB + 8, width), np.float64)  # rows _GB.. hold the group frusta
         I = np.zeros((nthr, _NI, width), np.int32)
         stamps = np.full((nthr, max(self.n_, 1)), -1, np.int32)
+        # a slice's cells: at most the product of the grid's two largest sides
+        CL = np.empty((nthr, int(np.sort(self.res_)[1:].prod())), np.int32)
+        L = np.empty((nthr, 3, BATCH), np.int32)
         cgt_trace(o, d, tmin, tmax, anyhit, k2, self.gp_, self.res_, self.cell_start_, self.occupied_, self.tri_ids_,
                   self.tri_verts_, self.macro_, max(self.macro, 1), self.mailbox, self.frustum_cull,
-                  W, I, stamps, out_t, out_id, counters, pc)
+                  W, I, CL, L, stamps, out_t, out_id, counters, pc)
         return out_t, out_id
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):

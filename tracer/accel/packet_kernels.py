@@ -16,6 +16,7 @@ from numba.extending import intrinsic
 
 from tracer.accel._jit import jit, ray_jit
 from tracer.accel.geometry import INF, PARALLEL_COS
+from tracer.accel.simd import prefetch
 
 #: margin in cell units for cell ranges, first/last slices and the culling planes
 EPS = 1e-6
@@ -32,6 +33,12 @@ _BID, _IDX, _SINGLE, _NL, _NT = range(5)
 #: first row of the group frusta (8 rows: :func:`_frustum`) in the float work array
 _GB = _NW
 _NI = 5
+#: references gathered and mailboxed at a time before their tests (:func:`_gather`)
+BATCH = 256
+#: a reference's vertex row is prefetched this many kept references before its test
+TV_AHEAD = 4
+# rows of the per-thread reference-list array: references, their triangle ids, first-visit flags
+_RL, _TL, _FL = range(3)
 #: the ray loop of a triangle test runs over a multiple of this many rays (SIMD width in doubles);
 #: the group frusta (:func:`_frustum`) bound groups of this many slots, one vector each
 LANES = 8
@@ -416,3 +423,59 @@ def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr, edge, ox, 
     return (_edge_out(n0k, n0u, n0v, sig, ru, rv, slo_u, shi_u, slo_v, shi_v, side)
             or _edge_out(n1k, n1u, n1v, sig, ru, rv, slo_u, shi_u, slo_v, shi_v, side)
             or _edge_out(n2k, n2u, n2v, sig, ru, rv, slo_u, shi_u, slo_v, shi_v, side))
+
+
+@ray_jit
+def _slice_cells(u0, u1, v0, v1, sbase, stU, stV, occb, cell_start, CL):
+    """The slice's occupied cells in traversal order (v outer, u inner) into CL[:nc], with no branch
+    per cell (an empty cell's entry is overwritten by the next one); each one's start entry is
+    prefetched so that :func:`_gather`'s loads overlap. Returns nc."""
+    nc = 0
+    for iv in range(v0, v1 + 1):
+        for iu in range(u0, u1 + 1):
+            c = sbase + iu * stU + iv * stV
+            CL[nc] = c
+            nc += (occb[c >> 3] >> (c & 7)) & 1
+    for k in range(nc):
+        prefetch(cell_start, np.uintp(CL[k]))
+    return nc
+
+
+@ray_jit
+def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, L, pid, stamping, mailbox, stamps):
+    """The next batch of up to BATCH references of the occupied cells CL[:nc], in traversal order
+    (cursor: cell CL[kc] next, references [rcur, rend) of the current cell left), then the packet's
+    mailbox over the batch (``stamping``: stamp each triangle with the packet id ``pid``; a triangle
+    stamped before is dropped with ``mailbox``, else kept with L[_FL] = 0). The kept references,
+    triangle ids and first-visit flags go to L[_RL], L[_TL], L[_FL]. Gathering first keeps each
+    phase's loads independent of the tests, so they overlap (a cell at a time, they waited on each
+    other). Returns (kept, gathered, kc, rcur, rend)."""
+    nr = 0
+    while nr < BATCH:
+        if rcur >= rend:
+            if kc >= nc:
+                break
+            c = CL[kc]
+            kc += 1
+            rcur = cell_start[c]
+            rend = cell_start[c + 1]
+            continue
+        take = min(rend - rcur, BATCH - nr)
+        for k in range(take):
+            L[_RL, nr + k] = rcur + k
+            prefetch(tri_ids, np.uintp(rcur + k))
+        nr += take
+        rcur += take
+    nk = 0
+    for k in range(nr):
+        r = L[_RL, k]
+        tid = tri_ids[r]
+        first = True
+        if stamping:
+            first = stamps[tid] != pid
+            stamps[tid] = pid
+        L[_RL, nk] = r
+        L[_TL, nk] = tid
+        L[_FL, nk] = first
+        nk += first or not mailbox
+    return nk, nr, kc, rcur, rend
