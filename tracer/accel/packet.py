@@ -72,8 +72,9 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, TV_AHEAD, _FL, _RL, _TL, _cells, _compact,
-    _culled, _frame, _frustum, _gather, _max, _min, _needs, _retire, _slice_cells, _span, _spread, _test_tri,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, TV_AHEAD, _FL, _RL, _TL, _cells,
+    _culled, _frame, _frustum, _gather, _max, _min, _needs, _retire, _shrink, _slice_cells, _span, _spread,
+    _test_tri,
 )
 from tracer.accel.simd import prefetch
 
@@ -353,15 +354,11 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                         changed = True
                         if anyhit and nh > 0:  # any hit: a ray that hit is done now, not at the slice's end
                             _needs(n, True, W, I)
-                            n, retired = _compact(n, -1, W, I, out_t, out_id, counters)
+                            n, fr, ox0, oy0, oz0, nlast, nfirst = _shrink(n, -1, W, I, GB, fr, out_t, out_id,
+                                                                          counters)
                             if n == 0:
                                 break
-                            if retired:
-                                fr = _frustum(n, W, GB)
-                                if edge:
-                                    ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
-                                nlast, nfirst = _span(n, I)
-                                cull_now = cull and n > CULL_MIN_RAYS
+                            cull_now = cull and n > CULL_MIN_RAYS
                 if n == 0:
                     break
                 if changed:  # a ray with a hit needs no slice past its hit's
@@ -369,14 +366,9 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                 # ---- retire rays that need no further slice (checked when a hit came or the earliest
                 # last slice is reached); the frustum shrinks to the rest
                 if changed or s >= nfirst:
-                    n, retired = _compact(n, s, W, I, out_t, out_id, counters)
+                    n, fr, ox0, oy0, oz0, nlast, nfirst = _shrink(n, s, W, I, GB, fr, out_t, out_id, counters)
                     if n == 0:
                         break
-                    if retired:
-                        fr = _frustum(n, W, GB)
-                        if edge:
-                            ox0 = W[_OX, 0]; oy0 = W[_OY, 0]; oz0 = W[_OZ, 0]
-                    nlast, nfirst = _span(n, I)
                 s += 1
             for q in range(n):
                 _retire(q, I[_IDX, q], W, I, out_t, out_id, counters)

@@ -385,6 +385,18 @@ def _compact(n, s, W, I, out_t, out_id, counters):
 
 
 @ray_jit
+def _shrink(n, s, W, I, GB, fr, out_t, out_id, counters):
+    """Retire the rays of slots [0, n) that need no slice past ``s`` (:func:`_compact`) and return
+    what the rest need: (rays left, their frustum (``fr`` when none retired), slot 0's origin (the
+    common origin of the edge culling), their slice span (:func:`_span`))."""
+    n, retired = _compact(n, s, W, I, out_t, out_id, counters)
+    if retired and n > 0:
+        fr = _frustum(n, W, GB)
+    nlast, nfirst = _span(n, I)
+    return n, fr, W[_OX, 0], W[_OY, 0], W[_OZ, 0], nlast, nfirst
+
+
+@ray_jit
 def _cells(alo, ahi, slo, shi, s0, s1, n):
     """Cells [c0, c1] (clipped to [0, n)) the frustum covers along one axis for k' in [s0, s1]."""
     lo = min(alo + slo * s0, alo + slo * s1)
