@@ -12,6 +12,7 @@ from tracer.errors import GridcostError
 from tracer.accel.grid import UniformGrid
 from tracer.accel.oracle import compare, oracle_intersect
 from tracer.accel.packet import PACKET_COUNTERS, CoherentGrid
+from tracer.accel.packet_kernels import BATCH
 from tracer.scenes.rays import camera_rays, make_rays
 
 PACKETS = (1, 2, 4, 8, 16, 32)  # 32: 1,024 rays, 128 groups of 8 (two bitmasks of 64)
@@ -64,6 +65,25 @@ def test_variants_agree_and_occlusion(bunny, variant):
         tmax = np.where(ref.tri_id >= 0, ref.t * 0.999, 1e30).astype(np.float32)
         ref_occ, _ = oracle(bunny, o, d, (bunny.name, label, "occ"), tmax=tmax)
         np.testing.assert_array_equal(cgt.occluded(o, d, tmax), ref_occ.tri_id >= 0)
+
+
+@pytest.mark.parametrize("res", [(1, 1, 1), (2, 1, 1)])
+def test_references_past_one_batch(bunny, res):
+    """A grid of one or two cells holds more references per cell than one batch of
+    :func:`tracer.accel.packet_kernels._gather` takes, so batches split inside a cell: every
+    reference is still tested once per packet, so hits and mailbox counts stay right."""
+    cgt = CoherentGrid(packet=8, res=res).build(bunny)
+    assert np.diff(cgt.cell_start_).max() > BATCH
+    r = camera_rays(bunny, SIDE, SIDE, tile=8)
+    ref, ties = oracle(bunny, r.origins, r.directions, (bunny.name, "camera-tile8"))
+    pc = cgt.packet_counters(r.origins, r.directions)
+    assert compare(pc["hits"], ref, ties)["disagreements"] == 0
+    live = pc["slices"] > 0
+    assert live.any() and (pc["considered"][live] > BATCH).all()
+    # with one reference per triangle and cell, a packet tests each triangle it meets at most once:
+    # tests with mailboxing are at most (triangles) x (rays); without, the references' count
+    assert (pc["tests_mb"] <= bunny.n * pc["packet_rays"]).all()
+    assert (pc["tests_mb"] < pc["tests_plain"]).any() == (np.prod(res) > 1)
 
 
 def test_build_factory_and_bad_parameters(bunny):
