@@ -18,7 +18,8 @@ packets, each thread with its own work arrays):
    the cell table); per-packet mailboxing (triangles stamped with the packet id, Sec 2.3) and
    frustum culling: a triangle is rejected when its vertices lie outside one of the four frustum
    planes or, with a common origin, when the four corner rays miss it on one edge (Dmitriev's shaft
-   culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays). Then the group
+   culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays; smaller ones skip
+   the packet's planes, which the group frusta bound tighter, and go straight there). Then the group
    frusta: the packet's slots form groups of LANES rays (a row of the tile until retired rays are
    replaced), each with its own frustum bounds, and a triangle is tested only on the groups whose
    frustum its grid-space box may meet (a small triangle meets one or two rows of an 8x8 packet):
@@ -330,7 +331,11 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                         bx = np.float64(tv[r, 3]); by = np.float64(tv[r, 4]); bz = np.float64(tv[r, 5])
                         cx = np.float64(tv[r, 6]); cy = np.float64(tv[r, 7]); cz = np.float64(tv[r, 8])
                         fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
-                        if cull_now or counting:
+                        # a triangle within EDGE_MIN cells gets no edge test, and the group frusta
+                        # (_test_tri) bound it tighter than the packet's planes: it goes straight there
+                        small = (max(fv[3], fv[4], fv[5]) - min(fv[3], fv[4], fv[5]) <= EDGE_MIN
+                                 and max(fv[6], fv[7], fv[8]) - min(fv[6], fv[7], fv[8]) <= EDGE_MIN)
+                        if (cull_now and not small) or counting:
                             out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
                                           edge, ox0, oy0, oz0, ru, rv)
                             if counting and L[_FL, k] != 0:
@@ -338,7 +343,7 @@ def _packets(p0, p1, k2, O, D, tmin, tmax, anyhit, gp, res, cell_start, occb, tr
                                 acc_mb += n
                                 if not out:
                                     acc_fc += n
-                            if cull_now and out:
+                            if cull_now and not small and out:
                                 skips += 1
                                 culled += 1
                                 continue

@@ -142,6 +142,9 @@ def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy
     n hold retired or unused rays, whose results are never read. Why explicit vectors: LLVM
     vectorises a plain loop over the lanes only when it runs over a whole packet, not over the few
     groups the group frusta leave (it unrolled or kept those scalar: 5-8 ns per lane instead of 3)."""
+    groups = _groups(n, cull, GB, fv, 0)
+    if groups == 0 and n <= 64 * LANES:  # culled by every group frustum: the edges are not needed
+        return 0, 0, 0
     e1x = bx - ax
     e1y = by - ay
     e1z = bz - az
@@ -162,7 +165,8 @@ def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy
     lanes = 0
     real = 0
     for b0 in range(0, (n + LANES - 1) // LANES, 64):  # blocks of 64 groups (one bitmask each)
-        groups = _groups(n, cull, GB, fv, b0)
+        if b0 > 0:
+            groups = _groups(n, cull, GB, fv, b0)
         while groups != 0:
             i = (b0 + _ctz(groups)) * LANES
             groups &= groups - 1
@@ -222,24 +226,25 @@ def _spread(counters, n, col, v, I):
 @jit
 def _frustum(n, W, GB):
     """The frustum of rays [0, n): u in [alo_u + slo_u k', ahi_u + shi_u k'], same for v; and the
-    same eight bounds of each group of LANES slots in GB[:, g] (rows in that order)."""
+    same eight bounds of each group of LANES slots in GB[:, g] (rows in that order). ``_min(x, acc)``
+    keeps the builtin ``min(acc, x)``'s rule (a NaN x is passed over) as a select LLVM vectorises."""
     for g in range((n + LANES - 1) // LANES):
         alo_u = slo_u = alo_v = slo_v = INF
         ahi_u = shi_u = ahi_v = shi_v = -INF
         for q in range(g * LANES, min(n, g * LANES + LANES)):
-            alo_u = min(alo_u, W[_AU, q]); ahi_u = max(ahi_u, W[_AU, q])
-            alo_v = min(alo_v, W[_AV, q]); ahi_v = max(ahi_v, W[_AV, q])
-            slo_u = min(slo_u, W[_SU, q]); shi_u = max(shi_u, W[_SU, q])
-            slo_v = min(slo_v, W[_SV, q]); shi_v = max(shi_v, W[_SV, q])
+            alo_u = _min(W[_AU, q], alo_u); ahi_u = _max(W[_AU, q], ahi_u)
+            alo_v = _min(W[_AV, q], alo_v); ahi_v = _max(W[_AV, q], ahi_v)
+            slo_u = _min(W[_SU, q], slo_u); shi_u = _max(W[_SU, q], shi_u)
+            slo_v = _min(W[_SV, q], slo_v); shi_v = _max(W[_SV, q], shi_v)
         GB[0, g] = alo_u; GB[1, g] = ahi_u; GB[2, g] = slo_u; GB[3, g] = shi_u
         GB[4, g] = alo_v; GB[5, g] = ahi_v; GB[6, g] = slo_v; GB[7, g] = shi_v
     alo_u = slo_u = alo_v = slo_v = INF
     ahi_u = shi_u = ahi_v = shi_v = -INF
     for g in range((n + LANES - 1) // LANES):
-        alo_u = min(alo_u, GB[0, g]); ahi_u = max(ahi_u, GB[1, g])
-        slo_u = min(slo_u, GB[2, g]); shi_u = max(shi_u, GB[3, g])
-        alo_v = min(alo_v, GB[4, g]); ahi_v = max(ahi_v, GB[5, g])
-        slo_v = min(slo_v, GB[6, g]); shi_v = max(shi_v, GB[7, g])
+        alo_u = _min(GB[0, g], alo_u); ahi_u = _max(GB[1, g], ahi_u)
+        slo_u = _min(GB[2, g], slo_u); shi_u = _max(GB[3, g], shi_u)
+        alo_v = _min(GB[4, g], alo_v); ahi_v = _max(GB[5, g], ahi_v)
+        slo_v = _min(GB[6, g], slo_v); shi_v = _max(GB[7, g], shi_v)
     return alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v
 
 
@@ -475,7 +480,9 @@ def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, L, pid, stamping, mailb
         take = min(rend - rcur, BATCH - nr)
         for k in range(take):
             L[_RL, nr + k] = rcur + k
+        for k in range(0, take, 16):  # one prefetch per 64-byte line of ids
             prefetch(tri_ids, np.uintp(rcur + k))
+        prefetch(tri_ids, np.uintp(rcur + take - 1))
         nr += take
         rcur += take
     nk = 0
