@@ -133,16 +133,16 @@ def _ctz(typingctx, m):
 
 
 @ray_jit
-def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counting):
-    """Rays [0, n) of the packet against one triangle (float64 vertices; ``fv`` its grid-frame
-    coordinates, :func:`_frame`), a group of LANES slots at a time (:func:`_tri8c`, :func:`_tri8o`);
+def _test_tri(n, cull, GB, box, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counting):
+    """Rays [0, n) of the packet against one triangle (float64 vertices; ``box`` its grid-space box,
+    :func:`_box`), a group of LANES slots at a time (:func:`_tri8c`, :func:`_tri8o`);
     with ``cull`` only the groups :func:`_groups` leaves. The ray-independent terms are hoisted (with
     a common origin also s = a - o and s.n). Returns (lanes that hit, lanes tested, real rays
     tested; no lane tested: culled); ``counting`` adds a test to each real ray's I[_NT]. Slots past
     n hold retired or unused rays, whose results are never read. Why explicit vectors: LLVM
     vectorises a plain loop over the lanes only when it runs over a whole packet, not over the few
     groups the group frusta leave (it unrolled or kept those scalar: 5-8 ns per lane instead of 3)."""
-    groups = _groups(n, cull, GB, fv, 0)
+    groups = _groups(n, cull, GB, box, 0)
     if groups == 0 and n <= 64 * LANES:  # culled by every group frustum: the edges are not needed
         return 0, 0, 0
     e1x = bx - ax
@@ -166,7 +166,7 @@ def _test_tri(n, cull, GB, fv, common, W, I, tid, ax, ay, az, bx, by, bz, cx, cy
     real = 0
     for b0 in range(0, (n + LANES - 1) // LANES, 64):  # blocks of 64 groups (one bitmask each)
         if b0 > 0:
-            groups = _groups(n, cull, GB, fv, b0)
+            groups = _groups(n, cull, GB, box, b0)
         while groups != 0:
             i = (b0 + _ctz(groups)) * LANES
             groups &= groups - 1
@@ -312,18 +312,24 @@ def _gmask(typingctx, GB, g0, box):
 
 
 @ray_jit
-def _groups(n, cull, GB, fv, b0):
+def _box(fv):
+    """The grid-space box (u_lo, u_hi, v_lo, v_hi, k'_lo, k'_hi) of a triangle whose frame
+    coordinates (:func:`_frame`) are ``fv``."""
+    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = fv
+    return (min(gu0, gu1, gu2), max(gu0, gu1, gu2), min(gv0, gv1, gv2), max(gv0, gv1, gv2),
+            min(k0, k1, k2), max(k0, k1, k2))
+
+
+@ray_jit
+def _groups(n, cull, GB, box, b0):
     """Bitmask (bit j: group b0 + j) of the packet's groups of LANES slots among b0 .. b0 + 63 (rays
-    [0, n)) the triangle whose frame coordinates (:func:`_frame`) are ``fv`` may meet: with
-    ``cull`` the groups whose frustum its grid-space box does not lie outside (:func:`_gmask`), else
-    every group. A set rather than one range: a triangle meets one or two rows of an 8x8 packet, not
-    always adjacent slots once retired rays are replaced."""
+    [0, n)) the triangle whose grid-space box (:func:`_box`) is ``box`` may meet: with ``cull`` the
+    groups whose frustum the box does not lie outside (:func:`_gmask`), else every group. A set
+    rather than one range: a triangle meets one or two blocks of an 8x8 packet, not always adjacent
+    slots once retired rays are replaced."""
     ng = min((n + LANES - 1) // LANES, b0 + 64)
     if not cull:
         return -1 if ng - b0 == 64 else (1 << (ng - b0)) - 1
-    k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = fv
-    box = (min(gu0, gu1, gu2), max(gu0, gu1, gu2), min(gv0, gv1, gv2), max(gv0, gv1, gv2),
-           min(k0, k1, k2), max(k0, k1, k2))
     m = 0
     for g0 in range(b0, ng, LANES):
         mg = _gmask(GB, g0, box)
@@ -412,8 +418,8 @@ def _cells(alo, ahi, slo, shi, s0, s1, n):
 @ray_jit
 def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr, edge, ox, oy, oz, ru, rv):
     """Is the triangle outside the frustum ``fr``? Planes first (``fv``: its vertices in the grid
-    frame, :func:`_frame`); corner rays against the edges (common origin ``o``) for triangles wider
-    than EDGE_MIN cells."""
+    frame, :func:`_frame`); then, with ``edge`` (the caller's: a common origin and the triangle wider
+    than EDGE_MIN cells), corner rays against the edges (common origin ``o``)."""
     alo_u, ahi_u, slo_u, shi_u, alo_v, ahi_v, slo_v, shi_v = fr
     va, vb, vc = (ax, ay, az), (bx, by, bz), (cx, cy, cz)
     k0, k1, k2, gu0, gu1, gu2, gv0, gv1, gv2 = fv
@@ -421,8 +427,7 @@ def _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr, edge, ox, 
         return True
     if _plane_cull(gv0, gv1, gv2, k0, k1, k2, alo_v, slo_v, ahi_v, shi_v):
         return True
-    if not edge or (max(gu0, gu1, gu2) - min(gu0, gu1, gu2) <= EDGE_MIN
-                    and max(gv0, gv1, gv2) - min(gv0, gv1, gv2) <= EDGE_MIN):
+    if not edge:
         return False
     o3 = (ox, oy, oz)
     w0k = va[K] - o3[K]; w0u = va[U] - o3[U]; w0v = va[V] - o3[V]
