@@ -12,7 +12,7 @@ from tracer.errors import GridcostError
 from tracer.accel.grid import UniformGrid
 from tracer.accel.oracle import compare, oracle_intersect
 from tracer.accel.packet import PACKET_COUNTERS, CoherentGrid, slot_order
-from tracer.accel.packet_kernels import BATCH
+from tracer.accel.packet_kernels import BATCH, BOX
 from tracer.scenes.rays import camera_rays, make_rays
 
 PACKETS = (1, 2, 4, 8, 16, 32)  # 32: 1,024 rays, 128 groups of 8 (two bitmasks of 64)
@@ -110,6 +110,26 @@ def test_ray_order_within_packets_changes_no_hit(bunny):
     assert (base.tri_id >= 0).sum() > r.n // 8
     np.testing.assert_array_equal(hits.tri_id, base.tri_id[perm])
     np.testing.assert_array_equal(hits.t, base.t[perm])
+
+
+@pytest.mark.parametrize("where", ((1.0, 0.0), (1.0, 1e5), (1e-3, 1e3)))
+def test_ref_boxes_hold_every_vertex(far_scene, where):
+    """Each reference's row holds its triangle's vertices, then a float32 box (packet_kernels.ref_boxes)
+    that holds the float64 grid-space coordinates (v - lo) * cells/extent of those vertices, the
+    ones the packet's frame computes, also on meshes far from the origin, where float32 rounding is
+    coarsest; and the box is tight: within a few float32 ulps of them."""
+    scene = far_scene("bunny-948", *where)
+    cgt = CoherentGrid(packet=8).build(scene)
+    gp = cgt.gp_
+    v = cgt.tri_verts_[:, :BOX].reshape(-1, 3, 3).astype(np.float64)
+    g = (v - gp[:3]) * gp[6:9]
+    lo, hi = g.min(axis=1), g.max(axis=1)
+    box = cgt.tri_verts_[:, BOX:BOX + 6].astype(np.float64)
+    np.testing.assert_array_equal(cgt.tri_verts_[:, :BOX], scene.tris.reshape(-1, 9)[cgt.tri_ids_])
+    assert len(box) == cgt.refs_ >= scene.n and np.prod(cgt.res_) > 1
+    assert (box[:, 0::2] <= lo).all() and (box[:, 1::2] >= hi).all()
+    ulp = np.spacing(np.abs(np.stack([lo, hi], axis=2)).astype(np.float32)).astype(np.float64)
+    assert (lo - box[:, 0::2] <= 2 * ulp[..., 0]).all() and (box[:, 1::2] - hi <= 2 * ulp[..., 1]).all()
 
 
 def test_build_factory_and_bad_parameters(bunny):

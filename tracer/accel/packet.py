@@ -20,15 +20,18 @@ packets, each thread with its own work arrays):
    planes or, with a common origin, when the four corner rays miss it on one edge (Dmitriev's shaft
    culling; only tried on triangles wider than ``EDGE_MIN`` cells, where it pays; smaller ones skip
    the packet's planes, which the group frusta bound tighter, and go straight there). Then the group
-   frusta: the packet's slots form groups of LANES rays (a 4 x 2 block of the tile, :func:`slot_order`,
-   until retired rays are replaced), each with its own frustum bounds, and a triangle is tested only on the groups whose
-   frustum its grid-space box may meet (a small triangle meets one or two blocks of an 8x8 packet):
-   one vector compare per bound gives the bitmask of those groups. Every test keeps a margin far
+   frusta: the packet's slots form groups of LANES rays (a 4 x 2 block of the tile,
+   :func:`slot_order`, until retired rays are replaced), each with its own frustum bounds, and a
+   triangle is tested only on the groups whose frustum its grid-space box may meet (a small
+   triangle meets one or two blocks of an 8x8 packet):
+   one vector compare per bound gives the bitmask of those groups. The box is stored in float32,
+   rounded outward, in the same 64-byte row as the reference's vertices
+   (:func:`tracer.accel.packet_kernels.ref_boxes`), so a small triangle no group meets is dropped
+   before its vertices are read. Every test keeps a margin far
    above rounding, so culling never drops a hit. A slice runs in phases (``_slice_cells``,
    ``_gather``): its occupied cells are listed without a branch per cell, their references
-   gathered in batches of BATCH and mailboxed, and only then loaded, culled and tested, the vertex
-   rows prefetched TV_AHEAD references ahead; the order of the tests is the cell-by-cell order, so
-   the hits are the same, and the loads of one phase no longer wait on the tests of the last.
+   gathered in batches of BATCH and mailboxed (their rows prefetched), and only then culled, loaded
+   and tested; the order of the tests is the cell-by-cell order, so the hits are the same, and the loads of one phase no longer wait on the tests of the last.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the
@@ -69,13 +72,16 @@ from tracer.accel import COUNTER_NAMES, Accel, Counters, Hits, as_rays, tmax_arr
 from tracer.accel.constants import WALD_LAMBDA, WALD_MACROCELL
 from tracer.errors import GridcostError
 from tracer.accel.geometry import INF, ray_box
+from tracer.accel.pages import traversal_empty
+from tracer.measure.footprint import CGT_ROW_BYTES
+from tracer.measure.memory import check_budget
 from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy, res_wald
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, TV_AHEAD, _FL, _RL, _TL, _box, _cells,
-    _culled, _frame, _frustum, _gather, _max, _min, _needs, _retire, _shrink, _slice_cells, _span, _spread,
-    _test_tri,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, _FL, _RL, _TL, _cells,
+    _culled, _frame, _frustum, _gather, _groups, _max, _min, _needs, _ref_box, _retire, _shrink, _slice_cells, _span,
+    _spread, _test_tri, _verts, ref_boxes, BOX, ROW,
 )
 from tracer.accel.simd import prefetch
 
@@ -329,29 +335,23 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                 cells += max(u1 - u0 + 1, 0) * max(v1 - v0 + 1, 0)
                 kc = rcur = rend = 0
                 while n > 0:  # batches of references: gathered, mailboxed, then culled and tested
-                    nk, nr, kc, rcur, rend = _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, L, pid, stamping,
+                    nk, nr, kc, rcur, rend = _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, tv, L, pid, stamping,
                                                      mailbox, stamps)
                     if nr == 0:
                         break
                     considered += nr
                     acc_plain += n * nr
                     skips += nr - nk
-                    for k in range(min(nk, TV_AHEAD)):
-                        prefetch(tv, np.uintp(L[_RL, k] * 9))
                     for k in range(nk):
-                        if k + TV_AHEAD < nk:
-                            prefetch(tv, np.uintp(L[_RL, k + TV_AHEAD] * 9))
                         r = L[_RL, k]
                         tid = L[_TL, k]
-                        ax = np.float64(tv[r, 0]); ay = np.float64(tv[r, 1]); az = np.float64(tv[r, 2])
-                        bx = np.float64(tv[r, 3]); by = np.float64(tv[r, 4]); bz = np.float64(tv[r, 5])
-                        cx = np.float64(tv[r, 6]); cy = np.float64(tv[r, 7]); cz = np.float64(tv[r, 8])
-                        fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
-                        box = _box(fv)
+                        box = _ref_box(tv, r, K, U, V, sig, P0)
                         # a triangle within EDGE_MIN cells gets no edge test, and the group frusta
-                        # (_test_tri) bound it tighter than the packet's planes: it goes straight there
+                        # (_groups) bound it tighter than the packet's planes: it goes straight there
                         small = box[1] - box[0] <= EDGE_MIN and box[3] - box[2] <= EDGE_MIN
                         if (cull_now and not small) or counting:
+                            ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, r)
+                            fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
                             out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
                                           edge and not small, ox0, oy0, oz0, ru, rv)
                             if counting and L[_FL, k] != 0:
@@ -363,13 +363,17 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                                 skips += 1
                                 culled += 1
                                 continue
-                        # whole vectors of LANES rays; with culling, only the groups whose frusta it may meet
-                        nh, lanes, real = _test_tri(n, cull_now and n > LANES, GB, box, common, W, I, tid,
-                                                    ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
-                        if lanes == 0:
+                        # whole vectors of LANES rays; with culling, only the groups whose frusta it may
+                        # meet: a triangle none meets is dropped before its vertices are loaded
+                        gcull = cull_now and n > LANES
+                        groups = _groups(n, gcull, GB, box, 0)
+                        if groups == 0 and n <= 64 * LANES:
                             skips += 1
                             culled += 1
                             continue
+                        ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, r)
+                        nh, lanes, real = _test_tri(n, gcull, GB, box, groups, common, W, I, tid,
+                                                    ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
                         acc_lanes += lanes
                         acc_tests += real
                         changed = True
@@ -471,9 +475,15 @@ class CoherentGrid(Accel):
         self.cell_start_, self.tri_ids_, self.tri_verts_, self.occupied_, _ = fill_cells(
             scene, res, gp, self.exact, "copy", self.macro)
         refs = len(self.tri_ids_)
+        # one 64-byte row per reference: its vertices, then its grid-space box (packet_kernels.ref_boxes)
+        check_budget(f"the packet grid's {refs:,} reference rows", refs * CGT_ROW_BYTES)
+        rows = traversal_empty((refs, ROW), np.float32)
+        rows[:, :BOX] = self.tri_verts_
+        self.tri_verts_ = ref_boxes(self.tri_verts_, gp, rows)
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None
         self.build_seconds_ = time.perf_counter() - t_start
         self.res_, self.gp_, self.n_, self.refs_ = res, gp, scene.n, refs
+        self.slot_order_ = slot_order(self.packet)
         self.scene_name_ = scene.name
         return self
 
@@ -490,9 +500,9 @@ class CoherentGrid(Accel):
         # a slice's cells: at most the product of the grid's two largest sides
         CL = np.empty((nthr, int(np.sort(self.res_)[1:].prod())), np.int32)
         L = np.empty((nthr, 3, BATCH), np.int32)
-        cgt_trace(o, d, tmin, tmax, anyhit, k2, slot_order(self.packet), self.gp_, self.res_, self.cell_start_, self.occupied_, self.tri_ids_,
-                  self.tri_verts_, self.macro_, max(self.macro, 1), self.mailbox, self.frustum_cull,
-                  W, I, CL, L, stamps, out_t, out_id, counters, pc)
+        cgt_trace(o, d, tmin, tmax, anyhit, k2, self.slot_order_, self.gp_, self.res_, self.cell_start_,
+                  self.occupied_, self.tri_ids_, self.tri_verts_, self.macro_, max(self.macro, 1),
+                  self.mailbox, self.frustum_cull, W, I, CL, L, stamps, out_t, out_id, counters, pc)
         return out_t, out_id
 
     def _trace(self, o, d, tmin, tmax, anyhit, count):

@@ -39,6 +39,9 @@ GRID_BYTES_PER_CELL = 4 + 1 / 8
 GRID_BYTES_PER_REF_ID = 4
 TRI_ROW_BYTES = 9 * 4
 GRID_MACRO_BYTES_PER_CELL = 4 + 1 + 1
+#: the packet grid then copies each reference's row into one 64-byte row with its grid-space box
+#: (tracer.accel.packet_kernels.ROW float32), while the 36-byte rows still exist
+CGT_ROW_BYTES = 16 * 4
 #: one nested level's peak per cell and per reference (the counts of tracer.accel.nested's own guard)
 NESTED_BYTES_PER_CELL = 44
 NESTED_BYTES_PER_REF = 82
@@ -143,7 +146,7 @@ def _grid(inst, scene) -> int:
 def _cgt(inst, scene) -> int:
     res = np.asarray(inst.res, np.int64) if getattr(inst, "res", None) is not None else _wald_res(scene, inst.lam)
     refs = expected_refs(scene, res, bool(getattr(inst, "exact", True)))
-    return grid_bytes(float(np.prod(res)), refs, scene.n, "copy", inst.macro)
+    return grid_bytes(float(np.prod(res)), refs, scene.n, "copy", inst.macro) + int(refs * CGT_ROW_BYTES)
 
 
 def _cell_counts(tris, lo, cell, res, pieces, cen) -> np.ndarray:
