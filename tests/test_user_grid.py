@@ -116,3 +116,26 @@ def test_validated_on_vtk_grid(run_cli, tmp_path):
     chk = json.loads(proc.stdout.strip().splitlines()[-1])
     assert chk["oracle"]["disagreements"] == 0 and chk["swept"] >= 12
     assert 0 <= chk["penalty_pct"] < 20 and len(chk["contenders"]) == 4 and chk["held_out_rounds"] == 11
+
+
+def test_held_out_penalty_reads_best_and_penalty_from_the_same_ratios(monkeypatch):
+    """The predicted grid against the swept contenders: when it is ahead in most rounds but slower by
+    median time (one slow round), it is the best (penalty 0, ahead by the median per-round ratio);
+    when a contender is 10 % faster in every round, the penalty is 10/0.9 %. Before, the best was
+    chosen by median time and the penalty read per round, which gave the first case -4.8 %."""
+    from experiments.tools import vtk_timings as vt
+    k = vt.CONTENDERS
+    df = pd.DataFrame({"cells": [1000 * (j + 1) for j in range(k + 1)], "seconds": [1.0] * (k + 1),
+                       "predicted": [True] + [False] * k})
+    slow = np.full((3, k - 1), 10.0)
+    cases = {"ahead": np.column_stack([[1.0, 2.0, 3.0], [1.1, 2.1, 1.5], slow]),
+             "behind": np.column_stack([[1.0, 2.0, 3.0], [0.9, 1.8, 2.7], slow])}
+    for name, t in cases.items():
+        monkeypatch.setattr(vt, "_round_times", lambda accs, rays, repeats, t=t: t)
+        out = vt._held_out_penalty(df, [None] * (k + 1), None, 3)
+        if name == "ahead":
+            assert out["penalty_pct"] == 0.0 and out["held_out_best_cells"] == 1000
+            assert out["ahead_pct"] == pytest.approx(5.0)
+        else:
+            assert out["penalty_pct"] == pytest.approx(100 / 9) and out["held_out_best_cells"] == 2000
+            assert "ahead_pct" not in out
