@@ -558,19 +558,23 @@ def test_grid_axis_aligned_rays_on_cell_planes(bunny):
 
 
 # ---------------------------------------------------------------- vertex layout
-def test_auto_layout_indexes_long_skinny_triangles(monkeypatch):
-    """"auto" reads vertices through the triangle id when the triangles fit in L2 and their
-    cell-order copy would not (long skinny triangles), and keeps the copy (as SoA blocks) otherwise."""
+def test_auto_layout_takes_blocks_and_index_saves_memory(monkeypatch):
+    """"auto" takes the SoA blocks whatever fits in L2 (long skinny triangles read through their ids
+    were slower than the blocks on every mesh timed); "index" stays on request: one row per triangle,
+    the least memory where each triangle is referenced by tens of cells, and the same hits."""
     from tracer.accel.grid import choose_layout
+    from tracer.measure.footprint import _layout
     from tracer.scenes.scene import load_scene
-    monkeypatch.setenv("GRIDCOST_L2", "1M")
-    assert choose_layout("auto", 3996, 214_196) == "index"  # 144 KiB of triangles, 7.4 MiB copied
-    assert choose_layout("auto", 948, 8_000) == "blocks"  # the copy fits in L2 as well
-    assert choose_layout("auto", 69_451, 200_000) == "blocks"  # the triangles alone exceed L2
-    assert choose_layout("copy", 3996, 214_196) == "copy"
+    for l2 in ("1M", "2M"):
+        monkeypatch.setenv("GRIDCOST_L2", l2)
+        assert choose_layout("auto", 3996, 214_196) == "blocks"  # 144 KiB of triangles, 7.4 MiB copied
+        assert choose_layout("auto", 47_794, 155_032) == "blocks"  # dragon-48k at 4N: 1.6 MiB of triangles
+        assert _layout("auto", 3996, 214_196) == "copy"  # the blocks' bytes are the copy's
+    assert choose_layout("copy", 3996, 214_196) == "copy" and choose_layout("index", 3996, 214_196) == "index"
     cyl = load_scene("cylinder-3996")
-    grid = UniformGrid(cells=132_651).build(cyl)
+    grid = UniformGrid(cells=132_651, layout="index").build(cyl)
     assert grid.stats()["layout"] == "index" and grid.tri_verts_.shape == (cyl.n, 9)
+    assert UniformGrid(cells=132_651).build(cyl).stats()["layout"] == "blocks"
     copy = UniformGrid(cells=132_651, layout="copy").build(cyl)
     assert copy.tri_verts_.shape == (copy.refs_, 9) and copy.refs_ > 30 * cyl.n
     assert grid.stats()["memory_bytes"] < copy.stats()["memory_bytes"] / 4

@@ -25,7 +25,7 @@ from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box,
 from tracer.accel.pages import traversal_empty, traversal_rows
 from tracer.accel.simd import ctz, popc
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
-from tracer.measure.memory import cache_bytes, check_budget, working_set
+from tracer.measure.memory import check_budget, working_set
 
 #: direct-mapped mailbox entries per thread (power of two)
 MAILBOX = 32
@@ -63,14 +63,17 @@ def choose_layout(layout: str, n_tris: int, refs: int) -> str:
     """Where a cell's triangle vertices are read from. "copy": duplicated into cell order (36 B per
     reference, read contiguously); "blocks": the same copy transposed into SoA blocks of four
     consecutive references (the same bytes, at most three rows of padding at the end), tested four
-    at a time; "index": one row per triangle reached through the reference's id. "auto" takes
-    "index" when the triangles fit in L2 but their cell-order copy does not — long skinny triangles,
-    referenced by tens of cells each (cylinder-3996 at 132k cells: 343 against 561 ns per random
-    ray); compact meshes take the blocks."""
+    at a time; "index": one row per triangle reached through the reference's id, the least memory
+    where triangles are referenced by many cells. "auto" takes the blocks. It used to take "index"
+    when the triangles fit in L2 but their copy did not: that beat the scalar "copy" (cylinder-3996
+    at 132k cells, 54 references per triangle: 343 against 561 ns per random ray) but not the
+    blocks, which read four at a time: on an Intel Xeon with 2 MiB of L2, "index" took 1.28-2.01x
+    the blocks' time per random ray (1.84-2.57x camera) on cylinder-3996, capped-cylinder-3996,
+    beetle-alt and dragon-48k, the last two compact meshes that fit that L2 (``n_tris``, ``refs``:
+    the grid's triangles and references, kept for callers that choose by them)."""
     if layout != "auto":
         return layout
-    l2 = cache_bytes(2)
-    return "index" if n_tris * TRI_ROW_BYTES <= l2 < refs * TRI_ROW_BYTES else "blocks"
+    return "blocks"
 
 
 def grid_params(bounds, res) -> np.ndarray:

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from tracer.errors import GridcostError
-from tracer.measure.memory import cache_bytes, fmt_bytes, memory_budget
+from tracer.measure.memory import fmt_bytes, memory_budget
 
 #: bytes per cell (int32 start + occupancy bit) and per reference (int32 id + 9 float32 vertices in
 #: cell order) of a grid build; macrocells add an int32 diff and two bool masks per cell
@@ -126,9 +126,11 @@ def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: i
 
 
 def _layout(layout: str, n: int, refs: float) -> str:
-    if layout != "auto":
-        return layout
-    return "index" if n * TRI_ROW_BYTES <= cache_bytes(2) < refs * TRI_ROW_BYTES else "copy"
+    """The grid build's layout (:func:`tracer.accel.grid.choose_layout`) by its bytes: "blocks"
+    holds what "copy" holds."""
+    from tracer.accel.grid import choose_layout
+    chosen = choose_layout(layout, n, int(refs))
+    return "copy" if chosen == "blocks" else chosen
 
 
 def _wald_res(scene, lam: float) -> np.ndarray:
