@@ -126,11 +126,10 @@ def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: i
 
 
 def _layout(layout: str, n: int, refs: float) -> str:
-    """The grid build's layout (:func:`tracer.accel.grid.choose_layout`) by its bytes: "blocks"
-    holds what "copy" holds."""
-    from tracer.accel.grid import choose_layout
-    chosen = choose_layout(layout, n, int(refs))
-    return "copy" if chosen == "blocks" else chosen
+    """The grid build's layout by its bytes: "auto" builds the blocks
+    (:func:`tracer.accel.grid.choose_layout`), and "blocks" holds what "copy" holds; ``n`` and
+    ``refs`` as choose_layout takes them."""
+    return "copy" if layout in ("auto", "blocks") else layout
 
 
 def _wald_res(scene, lam: float) -> np.ndarray:
