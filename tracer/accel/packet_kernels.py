@@ -17,6 +17,7 @@ from numba.extending import intrinsic
 from tracer.accel._jit import jit, ray_jit
 from tracer.accel.geometry import INF, PARALLEL_COS
 from tracer.accel.simd import prefetch
+from tracer.measure.footprint import CGT_ROW_BYTES
 
 #: margin in cell units for cell ranges, first/last slices and the culling planes
 EPS = 1e-6
@@ -44,7 +45,7 @@ LANES = 8
 #: then from column BOX the grid-space box (:func:`ref_boxes`), so the box test and the vertex loads
 #: that follow it read one line
 BOX = 9
-ROW = 16  # tracer.measure.footprint.CGT_ROW_BYTES = ROW * 4
+ROW = CGT_ROW_BYTES // 4  # the footprint estimate's row size (tracer.measure.footprint), in float32
 
 
 def _tri8_codegen(common):

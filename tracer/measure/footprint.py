@@ -40,7 +40,8 @@ GRID_BYTES_PER_REF_ID = 4
 TRI_ROW_BYTES = 9 * 4
 GRID_MACRO_BYTES_PER_CELL = 4 + 1 + 1
 #: the packet grid then copies each reference's row into one 64-byte row with its grid-space box
-#: (tracer.accel.packet_kernels.ROW float32), while the 36-byte rows still exist
+#: (the kernels' tracer.accel.packet_kernels.ROW float32 are read from here), while the 36-byte
+#: rows still exist
 CGT_ROW_BYTES = 16 * 4
 #: one nested level's peak per cell and per reference (the counts of tracer.accel.nested's own guard)
 NESTED_BYTES_PER_CELL = 44
