@@ -567,10 +567,9 @@ def test_auto_layout_takes_blocks_and_index_saves_memory(monkeypatch):
     from tracer.scenes.scene import load_scene
     for l2 in ("1M", "2M"):
         monkeypatch.setenv("GRIDCOST_L2", l2)
-        assert choose_layout("auto", 3996, 214_196) == "blocks"  # 144 KiB of triangles, 7.4 MiB copied
-        assert choose_layout("auto", 47_794, 155_032) == "blocks"  # dragon-48k at 4N: 1.6 MiB of triangles
-        assert _layout("auto", 3996, 214_196) == "copy"  # the blocks' bytes are the copy's
-    assert choose_layout("copy", 3996, 214_196) == "copy" and choose_layout("index", 3996, 214_196) == "index"
+        assert choose_layout("auto") == "blocks"
+        assert _layout("auto") == "copy"  # the blocks' bytes are the copy's
+    assert choose_layout("copy") == "copy" and choose_layout("index") == "index" and _layout("index") == "index"
     cyl = load_scene("cylinder-3996")
     grid = UniformGrid(cells=132_651, layout="index").build(cyl)
     assert grid.stats()["layout"] == "index" and grid.tri_verts_.shape == (cyl.n, 9)

@@ -59,7 +59,7 @@ def res_wald(bounds, n_tris: int, lam: float = WALD_LAMBDA) -> np.ndarray:
     return np.maximum(1, np.round(ext * k)).astype(np.int64)
 
 
-def choose_layout(layout: str, n_tris: int, refs: int) -> str:
+def choose_layout(layout: str) -> str:
     """Where a cell's triangle vertices are read from. "copy": duplicated into cell order (36 B per
     reference, read contiguously); "blocks": the same copy transposed into SoA blocks of four
     consecutive references (the same bytes, at most three rows of padding at the end), tested four
@@ -69,8 +69,7 @@ def choose_layout(layout: str, n_tris: int, refs: int) -> str:
     at 132k cells, 54 references per triangle: 343 against 561 ns per random ray) but not the
     blocks, which read four at a time: on an Intel Xeon with 2 MiB of L2, "index" took 1.28-2.01x
     the blocks' time per random ray (1.84-2.57x camera) on cylinder-3996, capped-cylinder-3996,
-    beetle-alt and dragon-48k, the last two compact meshes that fit that L2 (``n_tris``, ``refs``:
-    the grid's triangles and references, kept for callers that choose by them)."""
+    beetle-alt and dragon-48k, the last two compact meshes that fit that L2."""
     if layout != "auto":
         return layout
     return "blocks"
@@ -388,7 +387,7 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
     refs = int(grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, np.zeros(0, np.int32), False))
     if refs >= 2**31:
         raise GridcostError(f"{what}: {refs:,} triangle references exceed the int32 index range")
-    layout = choose_layout(layout, scene.n, refs)
+    layout = choose_layout(layout)
     check_budget(f"{what} with {refs:,} triangle references", grid_build_bytes(ncell, refs, scene.n, layout, macro))
     starts_shifted(cell_start)
     tri_ids = traversal_empty(refs, np.int32)

@@ -126,10 +126,9 @@ def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: i
     return int(b)
 
 
-def _layout(layout: str, n: int, refs: float) -> str:
+def _layout(layout: str) -> str:
     """The grid build's layout by its bytes: "auto" builds the blocks
-    (:func:`tracer.accel.grid.choose_layout`), and "blocks" holds what "copy" holds; ``n`` and
-    ``refs`` as choose_layout takes them."""
+    (:func:`tracer.accel.grid.choose_layout`), and "blocks" holds what "copy" holds."""
     return "copy" if layout in ("auto", "blocks") else layout
 
 
@@ -142,7 +141,7 @@ def _wald_res(scene, lam: float) -> np.ndarray:
 def _grid(inst, scene) -> int:
     res = inst._resolution(scene)
     refs = expected_refs(scene, res, bool(inst.exact))
-    return grid_bytes(float(np.prod(res)), refs, scene.n, _layout(inst.layout, scene.n, refs), inst.macro)
+    return grid_bytes(float(np.prod(res)), refs, scene.n, _layout(inst.layout), inst.macro)
 
 
 def _cgt(inst, scene) -> int:
