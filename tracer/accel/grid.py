@@ -64,15 +64,12 @@ def choose_layout(layout: str) -> str:
     reference, read contiguously); "blocks": the same copy transposed into SoA blocks of four
     consecutive references (the same bytes, at most three rows of padding at the end), tested four
     at a time; "index": one row per triangle reached through the reference's id, the least memory
-    where triangles are referenced by many cells. "auto" takes the blocks. It used to take "index"
-    when the triangles fit in L2 but their copy did not: that beat the scalar "copy" (cylinder-3996
-    at 132k cells, 54 references per triangle: 343 against 561 ns per random ray) but not the
-    blocks, which read four at a time: on an Intel Xeon with 2 MiB of L2, "index" took 1.28-2.01x
-    the blocks' time per random ray (1.84-2.57x camera) on cylinder-3996, capped-cylinder-3996,
-    beetle-alt and dragon-48k, the last two compact meshes that fit that L2."""
-    if layout != "auto":
-        return layout
-    return "blocks"
+    where triangles are referenced by many cells. "auto" takes the blocks: on an Intel Xeon with
+    2 MiB of L2, "index" took 1.28-2.01x the blocks' time per random ray (1.84-2.57x camera) on
+    cylinder-3996, capped-cylinder-3996, beetle-alt and dragon-48k, even where the triangles fit in
+    L2 and their copy did not; only on Ize's 8N^1.5 cylinders (140-250 references per triangle) did
+    it gain, 8-16 % on random rays, while losing up to 10 % on camera rays."""
+    return "blocks" if layout == "auto" else layout
 
 
 def grid_params(bounds, res) -> np.ndarray:

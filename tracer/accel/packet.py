@@ -26,12 +26,12 @@ packets, each thread with its own work arrays):
    triangle meets one or two blocks of an 8x8 packet): one vector compare per bound gives the
    bitmask of those groups. The box is stored in float32, rounded outward, in the same 64-byte row
    as the reference's vertices (:func:`tracer.accel.packet_kernels.ref_boxes`), so a small triangle
-   no group meets is dropped before its vertices are read. Every test keeps a margin far above rounding, so culling never
-   drops a hit. A slice runs in phases (``_slice_cells``, ``_gather``): its occupied cells are
-   listed without a branch per cell, their references gathered in batches of BATCH and mailboxed
-   (their rows prefetched), and only then culled, loaded and tested; the order of the tests is the
-   cell-by-cell order, so the hits are the same, and the loads of one phase no longer wait on the
-   tests of the last.
+   no group meets is dropped before its vertices are read. Every test keeps a margin far above
+   rounding, so culling never drops a hit. A slice runs in phases (``_slice_cells``, ``_gather``):
+   its occupied cells are listed without a branch per cell, their references gathered in batches
+   of BATCH and mailboxed (their rows prefetched), and only then culled, loaded and tested; the
+   order of the tests is the cell-by-cell order, so the hits are the same, and the loads of one
+   phase do not wait on the tests of the last.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the

@@ -118,18 +118,14 @@ def expected_refs(scene, res, exact: bool = True) -> float:
 
 
 def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: int = 0) -> int:
-    """Peak of a one-level grid build (the same inventory as tracer.accel.grid.grid_build_bytes)."""
-    rows = refs if layout == "copy" else n
+    """Peak of a one-level grid build (the same inventory as tracer.accel.grid.grid_build_bytes):
+    vertex rows in cell order ("copy", "blocks" and "auto", which builds the blocks) or one per
+    triangle ("index")."""
+    rows = n if layout == "index" else refs
     b = ncell * GRID_BYTES_PER_CELL + refs * GRID_BYTES_PER_REF_ID + rows * TRI_ROW_BYTES
     if macro:
         b += ncell * GRID_MACRO_BYTES_PER_CELL
     return int(b)
-
-
-def _layout(layout: str) -> str:
-    """The grid build's layout by its bytes: "auto" builds the blocks
-    (:func:`tracer.accel.grid.choose_layout`), and "blocks" holds what "copy" holds."""
-    return "copy" if layout in ("auto", "blocks") else layout
 
 
 def _wald_res(scene, lam: float) -> np.ndarray:
@@ -141,7 +137,7 @@ def _wald_res(scene, lam: float) -> np.ndarray:
 def _grid(inst, scene) -> int:
     res = inst._resolution(scene)
     refs = expected_refs(scene, res, bool(inst.exact))
-    return grid_bytes(float(np.prod(res)), refs, scene.n, _layout(inst.layout), inst.macro)
+    return grid_bytes(float(np.prod(res)), refs, scene.n, inst.layout, inst.macro)
 
 
 def _cgt(inst, scene) -> int:
