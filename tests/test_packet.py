@@ -114,7 +114,7 @@ def test_ray_order_within_packets_changes_no_hit(bunny):
 
 @pytest.mark.parametrize("where", ((1.0, 0.0), (1.0, 1e5), (1e-3, 1e3)))
 def test_ref_boxes_hold_every_vertex(far_scene, where):
-    """Each reference's row holds its triangle's vertices, then a float32 box (packet_kernels.ref_boxes)
+    """Each triangle's row holds its vertices, then a float32 box (packet_kernels.ref_boxes)
     that holds the float64 grid-space coordinates (v - lo) * cells/extent of those vertices, the
     ones the packet's frame computes, also on meshes far from the origin, where float32 rounding is
     coarsest; and the box is tight: within a few float32 ulps of them."""
@@ -125,8 +125,8 @@ def test_ref_boxes_hold_every_vertex(far_scene, where):
     g = (v - gp[:3]) * gp[6:9]
     lo, hi = g.min(axis=1), g.max(axis=1)
     box = cgt.tri_verts_[:, BOX:BOX + 6].astype(np.float64)
-    np.testing.assert_array_equal(cgt.tri_verts_[:, :BOX], scene.tris.reshape(-1, 9)[cgt.tri_ids_])
-    assert len(box) == cgt.refs_ >= scene.n and np.prod(cgt.res_) > 1
+    np.testing.assert_array_equal(cgt.tri_verts_[:, :BOX], scene.tris.reshape(-1, 9))
+    assert len(box) == scene.n < cgt.refs_ and np.prod(cgt.res_) > 1
     assert (box[:, 0::2] <= lo).all() and (box[:, 1::2] >= hi).all()
     ulp = np.spacing(np.abs(np.stack([lo, hi], axis=2)).astype(np.float32)).astype(np.float64)
     assert (lo - box[:, 0::2] <= 2 * ulp[..., 0]).all() and (box[:, 1::2] - hi <= 2 * ulp[..., 1]).all()

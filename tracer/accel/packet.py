@@ -25,11 +25,11 @@ packets, each thread with its own work arrays):
    triangle is tested only on the groups whose frustum its grid-space box may meet (a small
    triangle meets one or two blocks of an 8x8 packet): one vector compare per bound gives the
    bitmask of those groups. The box is stored in float32, rounded outward, in the same 64-byte row
-   as the reference's vertices (:func:`tracer.accel.packet_kernels.ref_boxes`), so a small triangle
+   as the triangle's vertices (:func:`tracer.accel.packet_kernels.ref_boxes`), so a small triangle
    no group meets is dropped before its vertices are read. Every test keeps a margin far above
    rounding, so culling never drops a hit. A slice runs in phases (``_slice_cells``, ``_gather``):
    its occupied cells are listed without a branch per cell, their references gathered in batches
-   of BATCH and mailboxed (their rows prefetched), and only then culled, loaded and tested; the
+   of BATCH and mailboxed (their triangles' rows prefetched), and only then culled, loaded and tested; the
    order of the tests is the cell-by-cell order, so the hits are the same, and the loads of one
    phase do not wait on the tests of the last.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
@@ -345,12 +345,12 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                     for k in range(nk):
                         r = L[_RL, k]
                         tid = L[_TL, k]
-                        box = _ref_box(tv, r, K, U, V, sig, P0)
+                        box = _ref_box(tv, tid, K, U, V, sig, P0)
                         # a triangle within EDGE_MIN cells gets no edge test, and the group frusta
                         # (_groups) bound it tighter than the packet's planes: it goes straight there
                         small = box[1] - box[0] <= EDGE_MIN and box[3] - box[2] <= EDGE_MIN
                         if (cull_now and not small) or counting:
-                            ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, r)
+                            ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, tid)
                             fv = _frame(ax, ay, az, bx, by, bz, cx, cy, cz, K, U, V, gp, sig, P0)
                             out = _culled(ax, ay, az, bx, by, bz, cx, cy, cz, fv, K, U, V, sig, fr,
                                           edge and not small, ox0, oy0, oz0, ru, rv)
@@ -371,7 +371,7 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                             skips += 1
                             culled += 1
                             continue
-                        ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, r)
+                        ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, tid)
                         nh, lanes, real = _test_tri(n, gcull, GB, box, groups, common, W, I, tid,
                                                     ax, ay, az, bx, by, bz, cx, cy, cz, tmin, counters is not None)
                         acc_lanes += lanes
@@ -405,7 +405,7 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
             t, tid, su_, st_, te_, sk_, ju_, oc_ = grid_ray(
                 np.float64(O[i, 0]), np.float64(O[i, 1]), np.float64(O[i, 2]), np.float64(D[i, 0]),
                 np.float64(D[i, 1]), np.float64(D[i, 2]), tmin, np.float64(tmax[i]), anyhit, gp,
-                nxg, nyg, nzg, cell_start, tri_ids, tv, None, 0, None, 0)
+                nxg, nyg, nzg, cell_start, tri_ids, tv, None, 0, None, 0, None, tri_ids)
             store_ray(out_t, out_id, counters, i, np.float32(t), tid, su_, st_, te_, 0, sk_)
             s_steps += st_
             s_tests += te_
@@ -473,11 +473,14 @@ class CoherentGrid(Accel):
         gp = grid_params(scene.bounds, res)
         #: occupied_: one bit per cell, set when the cell holds a triangle (little-endian bit order)
         self.cell_start_, self.tri_ids_, self.tri_verts_, self.occupied_, _ = fill_cells(
-            scene, res, gp, self.exact, "copy", self.macro)
+            scene, res, gp, self.exact, "index", self.macro)
         refs = len(self.tri_ids_)
-        # one 64-byte row per reference: its vertices, then its grid-space box (packet_kernels.ref_boxes)
-        check_budget(f"the packet grid's {refs:,} reference rows", refs * CGT_ROW_BYTES)
-        rows = traversal_empty((refs, ROW), np.float32)
+        # one 64-byte row per triangle (not per reference, as the single-ray grid's blocks: the mailbox
+        # drops a packet's repeats, and a third of the bytes on dragon-202k, 2.8 references per
+        # triangle, was 4 % faster there and 0-1 % on three other meshes, paired): its vertices,
+        # then its grid-space box (packet_kernels.ref_boxes)
+        check_budget(f"the packet grid's {scene.n:,} triangle rows", scene.n * CGT_ROW_BYTES)
+        rows = traversal_empty((scene.n, ROW), np.float32)
         rows[:, :BOX] = self.tri_verts_
         self.tri_verts_ = ref_boxes(self.tri_verts_, gp, rows)
         self.macro_ = macro_occupancy(self.cell_start_, res, self.macro) if self.macro else None

@@ -41,7 +41,7 @@ _RL, _TL, _FL = range(3)
 #: the ray loop of a triangle test runs over a multiple of this many rays (SIMD width in doubles);
 #: the group frusta (:func:`_frustum`) bound groups of this many slots, one vector each
 LANES = 8
-#: a packet grid's reference row (float32, ROW columns = one 64-byte line): the 9 vertex coordinates,
+#: a packet grid's triangle row (float32, ROW columns = one 64-byte line): the 9 vertex coordinates,
 #: then from column BOX the grid-space box (:func:`ref_boxes`), so the box test and the vertex loads
 #: that follow it read one line
 BOX = 9
@@ -315,7 +315,7 @@ def _gmask(typingctx, GB, g0, box):
 
 @ray_jit
 def _verts(tv, r):
-    """Reference r's vertex row as nine float64 (ax, ay, az, bx, ...)."""
+    """Triangle r's vertex row as nine float64 (ax, ay, az, bx, ...)."""
     return (np.float64(tv[r, 0]), np.float64(tv[r, 1]), np.float64(tv[r, 2]), np.float64(tv[r, 3]),
             np.float64(tv[r, 4]), np.float64(tv[r, 5]), np.float64(tv[r, 6]), np.float64(tv[r, 7]),
             np.float64(tv[r, 8]))
@@ -323,7 +323,7 @@ def _verts(tv, r):
 
 @ray_jit
 def _ref_box(tv, r, K, U, V, sig, P0):
-    """The grid-space box (u_lo, u_hi, v_lo, v_hi, k'_lo, k'_hi) of reference r in the packet's frame
+    """The grid-space box (u_lo, u_hi, v_lo, v_hi, k'_lo, k'_hi) of triangle r in the packet's frame
     (k' slices from the entry plane P0 in the packet's direction ``sig``, as :func:`_frame`), from
     its stored box ``tv[r, BOX:BOX + 6]`` (:func:`ref_boxes`). Rounding is monotone, so this box holds the one
     :func:`_frame`'s vertices span: the tests that use it stay conservative."""
@@ -335,7 +335,7 @@ def _ref_box(tv, r, K, U, V, sig, P0):
 
 @jit
 def ref_boxes(tv, gp, out):
-    """Each reference's grid-space box into ``out[r, BOX:BOX + 6]`` = (x_lo, x_hi, y_lo, y_hi, z_lo,
+    """Each triangle's grid-space box into ``out[r, BOX:BOX + 6]`` = (x_lo, x_hi, y_lo, y_hi, z_lo,
     z_hi) in cells (``tv``: the vertex rows, ``gp``: :func:`tracer.accel.grid.grid_params`),
     float32 rounded outward from the float64 (v - lo) * cells/extent that :func:`_frame` computes,
     so a packet tests a triangle's box against its group frusta before it reads the vertices (half or
@@ -510,7 +510,8 @@ def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, tv, L, pid, stamping, m
     stamped before is dropped with ``mailbox``, else kept with L[_FL] = 0). The kept references,
     triangle ids and first-visit flags go to L[_RL], L[_TL], L[_FL]. Gathering first keeps each
     phase's loads independent of the tests, so they overlap (a cell at a time, they waited on each
-    other); the references' rows ``tv`` (:data:`ROW`) are prefetched here, a batch ahead of their use.
+    other); each reference's triangle row ``tv[tid]`` (:data:`ROW`) is prefetched here, a batch ahead
+    of its use, also for repeats (their line is cached: a branch costs more).
     Returns (kept, gathered, kc, rcur, rend)."""
     nr = 0
     while nr < BATCH:
@@ -528,14 +529,13 @@ def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, tv, L, pid, stamping, m
         for k in range(0, take, 16):  # one prefetch per 64-byte line of ids
             prefetch(tri_ids, np.uintp(rcur + k))
         prefetch(tri_ids, np.uintp(rcur + take - 1))
-        for k in range(take):  # the rows (one per line) are read first: a whole batch ahead
-            prefetch(tv, np.uintp((rcur + k) * ROW))
         nr += take
         rcur += take
     nk = 0
     for k in range(nr):
         r = L[_RL, k]
         tid = tri_ids[r]
+        prefetch(tv, np.uintp(tid * ROW))
         first = True
         if stamping:
             first = stamps[tid] != pid
