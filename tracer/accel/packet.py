@@ -79,7 +79,7 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, _FL, _RL, _TL, _cells,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, _FL, _TL, _cells,
     _culled, _frame, _frustum, _gather, _groups, _max, _min, _needs, _ref_box, _retire, _shrink, _slice_cells, _span,
     _spread, _test_tri, _verts, ref_boxes, BOX, ROW,
 )
@@ -343,7 +343,6 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                     acc_plain += n * nr
                     skips += nr - nk
                     for k in range(nk):
-                        r = L[_RL, k]
                         tid = L[_TL, k]
                         box = _ref_box(tv, tid, K, U, V, sig, P0)
                         # a triangle within EDGE_MIN cells gets no edge test, and the group frusta

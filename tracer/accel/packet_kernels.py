@@ -36,7 +36,7 @@ _GB = _NW
 _NI = 5
 #: references gathered and mailboxed at a time before their tests (:func:`_gather`)
 BATCH = 256
-# rows of the per-thread reference-list array: references, their triangle ids, first-visit flags
+# rows of the per-thread reference-list array: references gathered, kept triangle ids, first-visit flags
 _RL, _TL, _FL = range(3)
 #: the ray loop of a triangle test runs over a multiple of this many rays (SIMD width in doubles);
 #: the group frusta (:func:`_frustum`) bound groups of this many slots, one vector each
@@ -507,8 +507,8 @@ def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, tv, L, pid, stamping, m
     """The next batch of up to BATCH references of the occupied cells CL[:nc], in traversal order
     (cursor: cell CL[kc] next, references [rcur, rend) of the current cell left), then the packet's
     mailbox over the batch (``stamping``: stamp each triangle with the packet id ``pid``; a triangle
-    stamped before is dropped with ``mailbox``, else kept with L[_FL] = 0). The kept references,
-    triangle ids and first-visit flags go to L[_RL], L[_TL], L[_FL]. Gathering first keeps each
+    stamped before is dropped with ``mailbox``, else kept with L[_FL] = 0). The batch's references go
+    to L[_RL]; the kept ones' triangle ids and first-visit flags to L[_TL], L[_FL]. Gathering first keeps each
     phase's loads independent of the tests, so they overlap (a cell at a time, they waited on each
     other); each reference's triangle row ``tv[tid]`` (:data:`ROW`) is prefetched here, a batch ahead
     of its use, also for repeats (their line is cached: a branch costs more).
@@ -540,7 +540,6 @@ def _gather(kc, rcur, rend, nc, CL, cell_start, tri_ids, tv, L, pid, stamping, m
         if stamping:
             first = stamps[tid] != pid
             stamps[tid] = pid
-        L[_RL, nk] = r
         L[_TL, nk] = tid
         L[_FL, nk] = first
         nk += first or not mailbox
