@@ -217,12 +217,12 @@ def _peak(fn):
 
 @pytest.mark.parametrize("params", [{"cells": 2e6}, {"cells": 2e6, "macro": 4}, {"cells": 2e6, "layout": "index"}])
 def test_grid_memory_estimate_matches_peak(params):
-    from tracer.accel.grid import grid_build_bytes
+    from tracer.measure.footprint import grid_bytes
     scene = load_scene("dragon-11k")
     build(scene, "grid", cells=1000)  # compile outside the measurement
     g, peak = _peak(lambda: build(scene, "grid", **params))
     st = g.stats()
-    est = grid_build_bytes(st["cells"], st["refs"], scene.n, g.layout_, g.macro)
+    est = grid_bytes(st["cells"], st["refs"], g.layout_, g.macro)
     assert peak / 1.5 <= est <= peak * 1.5, (est, peak)
 
 
@@ -236,11 +236,11 @@ def test_nested_memory_estimate_matches_peak(params):
 
 def test_grid_near_the_budget(monkeypatch):
     """Just over the estimate builds; just under refuses with the estimate in the message."""
-    from tracer.accel.grid import grid_build_bytes
+    from tracer.measure.footprint import grid_bytes
     scene = load_scene("bunny-948")
     g = build(scene, "grid", cells=1e6)
     st = g.stats()
-    est = grid_build_bytes(st["cells"], st["refs"], scene.n, g.layout_)
+    est = grid_bytes(st["cells"], st["refs"], g.layout_)
     monkeypatch.setenv("GRIDCOST_MEMORY_BUDGET", str(int(est * 1.01)))
     build(scene, "grid", cells=1e6)
     monkeypatch.setenv("GRIDCOST_MEMORY_BUDGET", str(int(est * 0.99)))

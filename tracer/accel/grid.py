@@ -25,6 +25,7 @@ from tracer.accel.geometry import INF, dda_cursor, dda_setup, dda_step, ray_box,
 from tracer.accel.pages import traversal_empty, traversal_rows
 from tracer.accel.simd import ctz, popc
 from tracer.accel.simd_tri import TRI4_WORDS, ray_tri4
+from tracer.measure.footprint import grid_bytes
 from tracer.measure.memory import check_budget, working_set
 
 #: direct-mapped mailbox entries per thread (power of two)
@@ -32,8 +33,6 @@ MAILBOX = 32
 #: relative enlargement of cells in the overlap test, so rounding never drops a touching triangle
 CELL_EPS = 1e-5
 NCOUNT = len(COUNTER_NAMES)
-#: bytes of one row of ``tri_verts_`` (three float32 vertices)
-TRI_ROW_BYTES = 9 * 4
 
 
 # ---------------------------------------------------------------- resolution rules
@@ -145,22 +144,6 @@ def occupancy_bits(cell_start, out):
     for c in range(cell_start.shape[0] - 1):
         if cell_start[c + 1] > cell_start[c]:
             out[c >> 3] |= np.uint8(1 << (c & 7))
-
-
-#: bytes a grid build holds per cell (int32 cell_start + occupancy bit), per reference (int32 id)
-#: and per copied reference (9 float32 vertices, "copy" layout); :func:`grid_build_bytes`
-BUILD_BYTES_PER_CELL = 4 + 1 / 8
-BUILD_BYTES_PER_REF = 4
-
-
-def grid_build_bytes(ncell: int, refs: int, n: int, layout: str = "copy", macro: int = 0) -> int:
-    """Peak bytes a grid build allocates (cell array, occupancy bits, reference ids, vertex rows in
-    cell order or one per triangle, and with macrocells the block occupancy pass: an int32 diff,
-    two bool arrays); checked against the measured peak by tests/test_memory.py."""
-    b = ncell * BUILD_BYTES_PER_CELL + refs * BUILD_BYTES_PER_REF + (n if layout == "index" else refs) * TRI_ROW_BYTES
-    if macro:
-        b += ncell * (4 + 1 + 1)
-    return int(b + 4)
 
 
 # ---------------------------------------------------------------- traversal
@@ -368,7 +351,7 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
     """The grid build shared by the one-level grid and the packet grid: count references per cell
     into an int32 array, turn the counts into starts in place, fill the ids (the starts advance to
     the ends: no cursor array), copy vertex rows per ``layout`` ("auto" through :func:`choose_layout`)
-    and set the occupancy bits. The memory guard checks :func:`grid_build_bytes` before allocating
+    and set the occupancy bits. The memory guard checks :func:`grid_bytes` before allocating
     (before counting with one reference per triangle, after counting with the real count).
     Returns (cell_start, tri_ids, tri_verts, occupancy bits, layout); ``tri_verts`` is flat
     (:func:`soa_blocks`) for "blocks", (rows, 9) otherwise."""
@@ -376,7 +359,7 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
     what = f"a {res[0]}x{res[1]}x{res[2]} grid ({ncell:,} cells) of {scene.name}"
     if ncell >= 2**31:
         raise GridcostError(f"{what}: over the int32 cell index range")
-    check_budget(what, grid_build_bytes(ncell, scene.n, scene.n, "copy", macro))
+    check_budget(what, grid_bytes(ncell, scene.n, "copy", macro))
     nx, ny, nz = (int(r) for r in res)
     # the arrays the kernels walk are made in place in traversal memory (tracer.accel.pages): no copy
     cell_start = traversal_empty(ncell + 1, np.int32)  # counts, then starts, then ends (grid_assign)
@@ -385,7 +368,7 @@ def fill_cells(scene, res, gp, exact: bool, layout: str = "copy", macro: int = 0
     if refs >= 2**31:
         raise GridcostError(f"{what}: {refs:,} triangle references exceed the int32 index range")
     layout = choose_layout(layout)
-    check_budget(f"{what} with {refs:,} triangle references", grid_build_bytes(ncell, refs, scene.n, layout, macro))
+    check_budget(f"{what} with {refs:,} triangle references", grid_bytes(ncell, refs, layout, macro))
     starts_shifted(cell_start)
     tri_ids = traversal_empty(refs, np.int32)
     grid_assign(scene.tris, gp, nx, ny, nz, exact, cell_start, tri_ids, True)

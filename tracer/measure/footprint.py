@@ -120,12 +120,14 @@ def expected_refs(scene, res, exact: bool = True) -> float:
     return total
 
 
-def grid_bytes(ncell: float, refs: float, n: int, layout: str = "copy", macro: int = 0) -> int:
-    """Peak of a one-level grid build (the same inventory as tracer.accel.grid.grid_build_bytes):
-    vertex rows in cell order ("copy", "blocks" and "auto", which builds the blocks) or one per
-    triangle ("index")."""
-    rows = n if layout == "index" else refs
-    b = ncell * GRID_BYTES_PER_CELL + refs * GRID_BYTES_PER_REF_ID + rows * TRI_ROW_BYTES
+def grid_bytes(ncell: float, refs: float, layout: str = "copy", macro: int = 0) -> int:
+    """Peak bytes of a one-level grid build, the estimate the build's own memory guard checks
+    (tracer.accel.grid.fill_cells) and tests/test_provenance.py holds to tracemalloc's peak: cell
+    array (ncell + 1 int32) and occupancy bits, reference ids, vertex rows in cell order ("copy",
+    "blocks" and "auto", which builds the blocks; none for "index", whose cells read the scene's own
+    rows) and with macrocells the block occupancy pass (an int32 diff, two bool arrays)."""
+    rows = 0 if layout == "index" else refs
+    b = (ncell + 1) * GRID_BYTES_PER_CELL + refs * GRID_BYTES_PER_REF_ID + rows * TRI_ROW_BYTES
     if macro:
         b += ncell * GRID_MACRO_BYTES_PER_CELL
     return int(b)
@@ -140,14 +142,14 @@ def _wald_res(scene, lam: float) -> np.ndarray:
 def _grid(inst, scene) -> int:
     res = inst._resolution(scene)
     refs = expected_refs(scene, res, bool(inst.exact))
-    return grid_bytes(float(np.prod(res)), refs, scene.n, inst.layout, inst.macro)
+    return grid_bytes(float(np.prod(res)), refs, inst.layout, inst.macro)
 
 
 def _cgt(inst, scene) -> int:
     res = np.asarray(inst.res, np.int64) if getattr(inst, "res", None) is not None else _wald_res(scene, inst.lam)
     refs = expected_refs(scene, res, bool(getattr(inst, "exact", True)))
-    # "index" with no rows: the cells read the scene's own 36-byte rows, which the build does not copy
-    return grid_bytes(float(np.prod(res)), refs, 0, "index", inst.macro) + int(scene.n * CGT_ROW_BYTES)
+    # the cells read one packet row per triangle (tracer.accel.packet_kernels.ROW), not copies per reference
+    return grid_bytes(float(np.prod(res)), refs, "index", inst.macro) + int(scene.n * CGT_ROW_BYTES)
 
 
 def _cell_counts(tris, lo, cell, res, pieces, cen) -> np.ndarray:
