@@ -31,7 +31,8 @@ packets, each thread with its own work arrays):
    its occupied cells are listed without a branch per cell, their references gathered in batches
    of BATCH and mailboxed (their triangles' rows prefetched), and only then culled, loaded and tested; the
    order of the tests is the cell-by-cell order, so the hits are the same, and the loads of one
-   phase do not wait on the tests of the last.
+   phase do not wait on the tests of the last. For closest hits the small triangles' group masks
+   are a pass of their own, which keeps the survivors in order with no branch per triangle.
 4. Ray-triangle tests: LANES rays at a time on LLVM vectors (``<8 x double>``, Numba intrinsics),
    computing exactly the float64 expressions of :func:`tracer.accel.geometry.ray_triangle` in its
    order, without branches (only ray-independent ones hoisted), so hits agree bit for bit with the
@@ -79,7 +80,7 @@ from tracer.accel.grid import fill_cells, grid_params, grid_ray, macro_occupancy
 from tracer.accel.packet_kernels import CULL_REL, EDGE_MIN  # noqa: F401 (tuning constants, importable from here)
 from tracer.accel.packet_kernels import (  # the packet loop's building blocks (work arrays, SIMD test, frustum)
     EPS, _AU, _AV, _BEST, _BID, _C0, _C1, _DD, _DX, _DY, _DZ, _IDX, _KD, _KO, _NL, _NW,
-    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, _FL, _TL, _cells,
+    _GB, _NI, _NT, _OX, _OY, _OZ, _SINGLE, _SU, _SV, _T1, BATCH, LANES, _FL, _RL, _TL, _cells,
     _culled, _frame, _frustum, _gather, _groups, _max, _min, _needs, _ref_box, _retire, _shrink, _slice_cells, _span,
     _spread, _test_tri, _verts, ref_boxes, BOX, ROW,
 )
@@ -342,8 +343,36 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                     considered += nr
                     acc_plain += n * nr
                     skips += nr - nk
+                    # closest hit, culling, up to 32 groups: a first pass drops the small triangles no
+                    # group frustum meets without a branch per triangle (about half the references a
+                    # camera packet keeps; a branch on each was mispredicted) and leaves each survivor's
+                    # group mask in L[_RL] (0: the loop below decides, as for large triangles)
+                    fast = cull_now and LANES < n <= 32 * LANES and not counting and not anyhit
+                    if fast:
+                        j = 0
+                        for k in range(nk):
+                            tid = L[_TL, k]
+                            box = _ref_box(tv, tid, K, U, V, sig, P0)
+                            small = box[1] - box[0] <= EDGE_MIN and box[3] - box[2] <= EDGE_MIN
+                            g = _groups(n, True, GB, box, 0)
+                            L[_TL, j] = tid
+                            L[_RL, j] = np.int32(g if small else 0)  # g < 2^32: up to 32 groups
+                            j += (g != 0) | (not small)
+                        skips += nk - j
+                        culled += nk - j
+                        nk = j
                     for k in range(nk):
                         tid = L[_TL, k]
+                        groups = (np.int64(L[_RL, k]) & 0xFFFFFFFF) if fast else 0
+                        gcull = cull_now and n > LANES
+                        if groups != 0:  # kept by the first pass: straight to the test
+                            ax, ay, az, bx, by, bz, cx, cy, cz = _verts(tv, tid)
+                            nh, lanes, real = _test_tri(n, gcull, GB, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0), groups, common,
+                                                        W, I, tid, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, False)
+                            acc_lanes += lanes
+                            acc_tests += real
+                            changed = True
+                            continue
                         box = _ref_box(tv, tid, K, U, V, sig, P0)
                         # a triangle within EDGE_MIN cells gets no edge test, and the group frusta
                         # (_groups) bound it tighter than the packet's planes: it goes straight there
@@ -364,7 +393,6 @@ def _packets(p0, p1, k2, order, O, D, tmin, tmax, anyhit, gp, res, cell_start, o
                                 continue
                         # whole vectors of LANES rays; with culling, only the groups whose frusta it may
                         # meet: a triangle none meets is dropped before its vertices are loaded
-                        gcull = cull_now and n > LANES
                         groups = _groups(n, gcull, GB, box, 0)
                         if groups == 0 and n <= 64 * LANES:
                             skips += 1
