@@ -26,7 +26,7 @@ from tracer.storage import atomic_savez, cache_root, load_cached_npz  # noqa: F4
 from tracer.scenes.scenetype import Scene, validate
 
 FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
-CACHE_VERSION = 3
+CACHE_VERSION = 4  # 4: float32-collapse and truncated PLY/STL refusals (a v3 entry may hold such a mesh)
 
 
 def _sha256(path: Path) -> str:
@@ -136,6 +136,44 @@ def _obj_relative(data: bytes):
     return np.asarray(verts, np.float64).reshape(-1, 3), np.asarray(faces, np.int64).reshape(-1, 3)
 
 
+def _head(path: Path, data: bytes | None) -> tuple[bytes, int]:
+    """(first 64 KiB, size) of the (decompressed) file: enough for a PLY header or an STL's counts."""
+    if data is not None:
+        return data[:1 << 16], len(data)
+    with open(path, "rb") as f:
+        return f.read(1 << 16), path.stat().st_size
+
+
+def _check_stl_size(path: Path, head: bytes, size: int) -> None:
+    """A binary STL is 84 + 50 n bytes (80-byte header, uint32 n, 50 bytes a triangle); trimesh reads a
+    short one as an empty mesh, which would be reported as "empty", not as the truncation it is."""
+    if len(head) < 84 or (head.lstrip()[:5].lower() == b"solid" and (b"facet" in head or b"endsolid" in head)):
+        return  # ASCII STL (or too short to hold a count): left to trimesh
+    n = int.from_bytes(head[80:84], "little")
+    if size < 84 + 50 * n:
+        raise GridcostError(f"{path}: truncated STL: header declares {n:,} triangles, file holds {(size - 84) // 50:,}")
+
+
+def _check_ply_counts(path: Path, head: bytes, mesh) -> None:
+    """trimesh accepts an ASCII PLY that stops before its header's counts (binary ones it refuses), so
+    compare the header's ``element vertex/face N`` (ASCII up to end_header in every PLY) with what loaded."""
+    end = head.find(b"end_header")
+    declared = {}
+    for line in head[:max(end, 0)].splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == b"element" and parts[2].isdigit():
+            declared[parts[1].decode("ascii", "replace")] = int(parts[2])
+    raw = ((getattr(mesh, "metadata", None) or {}).get("_ply_raw") or {}).get("face")
+    data = raw.get("data") if isinstance(raw, dict) else None
+    if isinstance(data, dict) and data:
+        data = next(iter(data.values()))
+    faces = len(data) if data is not None else len(mesh.faces)  # rows as in the file (trimesh splits quads)
+    for element, noun, held in (("vertex", "vertices", len(mesh.vertices)), ("face", "faces", faces)):
+        if element in declared and held < declared[element]:
+            raise GridcostError(f"{path}: truncated PLY: header declares {declared[element]:,} {noun}, "
+                                f"file holds {held:,}")
+
+
 def _read(path: Path):
     import trimesh
     logging.getLogger("trimesh").setLevel(logging.ERROR)
@@ -144,6 +182,9 @@ def _read(path: Path):
     if suffix in (".obj", ".ply"):
         kwargs["skip_materials"] = True  # geometry never needs textures (and Pillow may be absent)
     data = _decompressed(path, compression) if compression else None
+    head, size = _head(path, data) if suffix in (".ply", ".stl") else (b"", 0)
+    if suffix == ".stl":
+        _check_stl_size(path, head, size)
     try:
         if suffix == ".obj":
             data = path.read_bytes() if data is None else data
@@ -165,6 +206,8 @@ def _read(path: Path):
                                  metadata=dict(loaded.metadata), process=False)
     if not isinstance(loaded, trimesh.Trimesh):
         raise GridcostError(f"{path}: holds no triangle mesh (trimesh loaded a {type(loaded).__name__})")
+    if suffix == ".ply":
+        _check_ply_counts(path, head, loaded)
     return loaded
 
 
@@ -205,9 +248,14 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     verts = np.asarray(mesh.vertices, dtype=np.float64)
     if len(faces) and (faces.max() >= len(verts) or faces.min() < 0):
         raise GridcostError(f"{path}: face indices out of range (max {faces.max()}, {len(verts)} vertices)")
-    tris = verts[faces].astype(np.float32) if len(faces) else np.zeros((0, 3, 3), np.float32)
-    if np.isfinite(verts).all() and not np.isfinite(tris).all():
-        raise GridcostError(f"{path}: vertices overflow float32")
+    t64 = verts[faces] if len(faces) else np.zeros((0, 3, 3))
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond float32 range -> inf, refused just below
+        tris = t64.astype(np.float32)
+    bad = ~np.isfinite(tris).all(axis=(1, 2))
+    if np.isfinite(verts).all() and bad.any():
+        raise GridcostError(f"{path}: {int(bad.sum()):,} triangles have vertices beyond float32 range "
+                            f"(first: triangle {int(np.flatnonzero(bad)[0])})")
+    report["collapsed_f32"] = _float32_collapse(path, t64, tris)
     report.update(validate(tris, str(path)))
     scene = Scene(tris, name, str(path), report)
     if use_cache:
@@ -216,10 +264,33 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     return scene
 
 
+def _zero_area(t: np.ndarray) -> np.ndarray:
+    """Zero-area triangles, computed in float64 (as :func:`validate` does)."""
+    t = t.astype(np.float64, copy=False)
+    return np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) == 0
+
+
+def _float32_collapse(path: Path, t64: np.ndarray, tris: np.ndarray) -> int:
+    """How many triangles the cast to float32 makes zero-area that were not in float64. Far from the
+    origin for its size a mesh is destroyed by it (at 1e7 float32 steps by 1.0): over 1 % of the
+    triangles is refused, as no answer about such a mesh is about the file's; fewer are reported."""
+    if not len(tris) or not np.isfinite(t64).all():
+        return 0  # empty or NaN/inf: validate refuses it
+    collapsed = int((_zero_area(tris) & ~_zero_area(t64)).sum())
+    if collapsed > 0.01 * len(tris):
+        v = t64.reshape(-1, 3)
+        raise GridcostError(f"{path}: {collapsed:,} of {len(tris):,} triangles collapse to zero area in float32 "
+                            f"(float32 precision: coordinates up to {np.abs(v).max():.3g} with a mesh extent of "
+                            f"{np.ptp(v, axis=0).max():.3g}); re-centre the mesh near the origin")
+    return collapsed
+
+
 def _say_degenerate(path: Path, scene: Scene) -> None:
     """One stderr line when the mesh holds zero-area triangles (a mesh of nothing else was refused
     by :func:`validate`): they are kept so triangle ids stay the file's, and no ray ever hits one."""
     k = scene.report.get("degenerate", 0)
     if k:
-        print(f"{path}: {k:,} of {scene.n:,} triangles are degenerate (zero area); kept, so triangle ids stay "
+        c = scene.report.get("collapsed_f32", 0)
+        why = f"; {c:,} of them only in float32, the mesh is far from the origin for its size" if c else ""
+        print(f"{path}: {k:,} of {scene.n:,} triangles are degenerate (zero area{why}); kept, so triangle ids stay "
               "the file's, and never hit", file=sys.stderr)
