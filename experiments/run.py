@@ -5,7 +5,8 @@ Every target module exposes ``add_arguments(parser)`` and ``main(ctx, args) -> i
 run's :class:`experiments.core.context.RunContext`).
 Bad input anywhere raises :class:`tracer.errors.GridcostError`; it is printed as one
 line on stderr and the process exits with status 2. Any other exception is an internal
-error: one line naming the target, exit status 1 (``--debug`` shows the traceback).
+error: one line naming the target, exit status 1 (``--debug`` shows the traceback). Ctrl-C and
+SIGTERM stop a run with one line (exit 130 / 143), its outputs put back as they were.
 ``all`` goes on after a failed target (targets are resumable), lists what failed and
 exits non-zero.
 """
@@ -15,7 +16,9 @@ import argparse
 import errno
 import importlib
 import os
+import signal
 import sys
+import threading
 
 # name -> (module, one-line help). Order is the dependency order used by `all`.
 TARGETS: dict[str, tuple[str, str]] = {
@@ -102,8 +105,16 @@ def _common(p: argparse.ArgumentParser) -> None:
                         "on every worker")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the CLI's rule for bad input: one line on stderr, exit status 2 (the stock
+    parser prints its usage block first)."""
+
+    def error(self, message):
+        self.exit(2, f"error: {self.prog}: {message} (--help lists the options)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="gridcost", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="gridcost", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="target", required=True, metavar="target")
     for name, (modname, helptext) in list(TARGETS.items()) + [("all", ("", "every target in dependency order"))]:
         p = sub.add_parser(name, help=helptext, description=helptext)
@@ -200,6 +211,19 @@ def _sub_args(name: str, args) -> argparse.Namespace:
     return build_parser().parse_args(_sub_argv(name, args))
 
 
+#: errors of an output path that cannot be written (read-only disk, no permission, a file in the way)
+_UNWRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EISDIR, errno.EEXIST)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C's KeyboardInterrupt so that every open output guard puts its
+    folder back (:class:`experiments.core.store.OutputGuard`)."""
+
+
+def _on_term(signum, frame):
+    raise Interrupted()
+
+
 def _failure(name: str, exc: BaseException, debug: bool) -> int:
     """One line on stderr for a failed target; 2 for bad input, 1 for an internal error."""
     from tracer.errors import GridcostError
@@ -214,14 +238,38 @@ def _failure(name: str, exc: BaseException, debug: bool) -> int:
         print(f"error: {name}: no space left on the device{where} ({exc.strerror}); free space or pass --out "
               f"on another disk", file=sys.stderr)
         return 2
+    if isinstance(exc, OSError) and exc.errno in _UNWRITABLE and exc.filename:
+        print(f"error: {name}: {exc.strerror}: {exc.filename} (is --out a folder you can write?)", file=sys.stderr)
+        return 2
     first = str(exc).splitlines()[0] if str(exc) else ""
     print(f"internal error in {name}: {type(exc).__name__}: {first} (--debug shows the traceback)", file=sys.stderr)
     return 1
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Parse the command line, build the one :class:`RunContext`, run the target (or all)."""
-    args = build_parser().parse_args(argv)
+    """Parse the command line, build the one :class:`RunContext`, run the target (or all).
+    Ctrl-C or SIGTERM: one line, the outputs as before the run (exit 130 or 143)."""
+    from tracer.errors import GridcostError
+    try:
+        parser = build_parser()  # imports the targets, which read GRIDCOST_* settings
+    except GridcostError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
+    old = signal.signal(signal.SIGTERM, _on_term) if threading.current_thread() is threading.main_thread() else None
+    try:
+        return _main(args)
+    except KeyboardInterrupt as exc:
+        term = isinstance(exc, Interrupted)
+        print(f"gridcost {args.target}: {'terminated' if term else 'interrupted'}; its outputs are as before the "
+              f"run, and running it again resumes from the points stored so far", file=sys.stderr)
+        return 143 if term else 130
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGTERM, old)
+
+
+def _main(args) -> int:
     bad = _check_settings(args)
     if bad:
         print(f"error: {args.target}: {bad}", file=sys.stderr)

@@ -141,7 +141,9 @@ def test_own_cache_files_cut_short_are_dropped_and_rebuilt(cut, tmp_path, monkey
 
 
 @pytest.mark.parametrize("content, why", [('{"key": {}, "provenance": {}, "val', "unreadable"),
-                                          ('{"garbage": 1}', "not a gridcost point")])
+                                          ('{"garbage": 1}', "not a gridcost point"),
+                                          ('{"key": {}, "provenance": {}, "value": {"x": "1"}, "sha": "0"}',
+                                           "does not match the checksum")])
 def test_a_bad_stored_point_is_named_set_aside_and_measured_again(content, why, tmp_path, capsys):
     from experiments.core.store import PointStore
     store = PointStore(tmp_path)

@@ -22,6 +22,28 @@ def add_ray_args(p, scenes: str, rays: str, repeats: str | None = None) -> None:
     p.add_argument("--seed", type=int, default=0)
 
 
+def side_list(text: str) -> list[int]:
+    """argparse ``type`` of a comma-separated list of image sides (pixels, 1..16384): a bad one is
+    refused by the parser with one line."""
+    import argparse
+    try:
+        sides = [int(s) for s in text.split(",")]
+    except ValueError:
+        sides = []
+    if not sides or not all(1 <= s <= 16384 for s in sides):
+        raise argparse.ArgumentTypeError(f"expected comma-separated image sides between 1 and 16384, got {text!r}")
+    return sides
+
+
+def scene_kinds(text: str) -> dict:
+    """argparse ``type`` of comma-separated ``name:compact|skinny`` pairs."""
+    import argparse
+    pairs = [s.split(":") for s in text.split(",")]
+    if not all(len(p) == 2 and p[0] and p[1] in ("compact", "skinny") for p in pairs):
+        raise argparse.ArgumentTypeError(f"expected comma-separated name:compact|skinny pairs, got {text!r}")
+    return dict(pairs)
+
+
 def add_image_args(p, scenes: str, side: str | None = None, repeats: str | None = None) -> None:
     """``--scenes``, then ``--side`` (image side in pixels) and ``--repeats`` (rounds) when their help is
     given, of a target that traces camera images."""

@@ -13,6 +13,7 @@ import fcntl
 import hashlib
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -170,6 +171,8 @@ class PointStore:
             return self._set_aside(p, f"unreadable ({type(exc).__name__})")
         if not (isinstance(rec, dict) and {"value", "key", "provenance"} <= set(rec)):
             return self._set_aside(p, "not a gridcost point (no value, key and provenance)")
+        if rec.get("sha") != _value_sha(rec["value"]):  # edited, or from a gridcost before the checksum
+            return self._set_aside(p, "altered (its value does not match the checksum it was stored with)")
         return rec
 
     def _set_aside(self, path: Path, why: str) -> None:
@@ -231,7 +234,8 @@ class PointStore:
         """Store ``value`` measured now (or by ``provenance``, e.g. a Dask worker's host)."""
         k = self.key(params)
         prov = {**self.ledger.now(), **(provenance or {}), "measured": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-        write_json(self.dir / f"{k}.json", {"key": self.measurement_key, "provenance": prov, "value": value})
+        write_json(self.dir / f"{k}.json", {"key": self.measurement_key, "provenance": prov, "value": value,
+                                            "sha": _value_sha(value)})
         self._fresh.add(k)
         self.ledger.measured += 1
         self.ledger.add(prov)
@@ -289,6 +293,26 @@ def write_index(out_dir, fig_dir) -> Path:
     return atomic_write(out_dir / "README.md", "\n".join(lines) + "\n")
 
 
+def _alive(pid, host) -> bool:
+    """Is process ``pid`` of this host running (a snapshot's maker still at work)?"""
+    if not isinstance(pid, int) or host != socket.gethostname() or pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def _value_sha(value) -> str:
+    """The checksum a point is stored with: a value that no longer matches it was changed after the
+    measurement (by hand, or by other code) and is measured again rather than reused."""
+    as_read = json.loads(json.dumps(value, default=_jsonable))  # as a reader sees it (str keys, floats)
+    return hashlib.sha1(json.dumps(as_read, sort_keys=True).encode()).hexdigest()
+
+
 class OutputGuard:
     """A target's outputs as they were before its run, put back if the run fails.
 
@@ -297,7 +321,9 @@ class OutputGuard:
     new inodes, so the links keep the old contents). On an exception the run's files are removed and
     the old ones put back; on success the links are dropped. :meth:`drop_stale` removes, after a
     successful run, the files the run did not rewrite (still the snapshot's inode): an earlier run's
-    outputs (an optional flag's, a renamed file's) are not kept beside this run's as if it made them."""
+    outputs (an optional flag's, a renamed file's) are not kept beside this run's as if it made them.
+    A run killed outright (SIGKILL, power loss) leaves the snapshot with its ``complete`` marker
+    (what it held); the next run on the folder puts it back first."""
 
     def __init__(self, folder: Path, fig_dir: Path | None = None, name: str = ""):
         self.folder, self.fig_dir, self.name = Path(folder), fig_dir, name or Path(folder).name
@@ -308,6 +334,17 @@ class OutputGuard:
 
     def __enter__(self):
         import shutil
+        try:  # a run killed while guarded (SIGKILL, power loss) left its snapshot: put it back first
+            before = json.loads((self.keep / "complete").read_text())
+        except (OSError, ValueError):  # none, or a snapshot cut short (the folder was not touched yet)
+            before = None
+        if before is not None and _alive(before.get("pid"), before.get("host")):
+            from tracer.errors import GridcostError
+            raise GridcostError(f"{self.folder} is being written by another gridcost run (pid {before['pid']}); "
+                                f"wait for it, or remove {self.keep} if no such run is going")
+        if before is not None:
+            self._put_back(before["folder"], before["figs"])
+            print(f"gridcost: {self.folder} put back as it was before an interrupted run", file=sys.stderr)
         shutil.rmtree(self.keep, ignore_errors=True)
         self.had_folder = self.folder.is_dir()
         self.old_figs = {}
@@ -318,10 +355,29 @@ class OutputGuard:
                 (self.keep / "figs").mkdir(parents=True, exist_ok=True)
                 os.link(f, self.keep / "figs" / f.name)
                 self.old_figs[f.name] = f
+            self.keep.mkdir(parents=True, exist_ok=True)  # the snapshot is whole: a later run may put it back
+            write_json(self.keep / "complete", {"folder": self.had_folder, "figs": sorted(self.old_figs),
+                                                "pid": os.getpid(), "host": socket.gethostname()})
         except OSError:  # no snapshot (a filesystem without hard links): the run goes ahead unguarded
             shutil.rmtree(self.keep, ignore_errors=True)
             self.had_folder, self.old_figs, self.keep = None, {}, None
         return self
+
+    def _put_back(self, had_folder: bool, old_figs: list) -> None:
+        """The folder and the ``<name>.*`` figures as before the run (``old_figs``: the figures'
+        names); the run's own are removed. What is no longer in the snapshot was put back already
+        (a put-back cut short is finished by the next run)."""
+        import shutil
+        if not (had_folder and not (self.keep / "folder").is_dir()):  # else: moved back already
+            shutil.rmtree(self.folder, ignore_errors=True)
+            if had_folder:
+                os.replace(self.keep / "folder", self.folder)
+        for f in self._figs():
+            if f.name not in old_figs:
+                f.unlink()
+        for nm in old_figs:
+            if (self.keep / "figs" / nm).exists():
+                os.replace(self.keep / "figs" / nm, self.fig_dir / nm)
 
     def drop_stale(self) -> list[Path]:
         """Remove the folder's files and the ``<name>.*`` figures this run did not rewrite (every
@@ -341,13 +397,7 @@ class OutputGuard:
         if self.keep is None:
             return False
         if exc_type is not None and self.had_folder is not None:
-            shutil.rmtree(self.folder, ignore_errors=True)
-            if self.had_folder:
-                os.replace(self.keep / "folder", self.folder)
-            for f in self._figs():
-                if f.name not in self.old_figs:
-                    f.unlink()
-            for nm, f in self.old_figs.items():
-                os.replace(self.keep / "figs" / nm, f)
+            self._put_back(self.had_folder, list(self.old_figs))
+        (self.keep / "complete").unlink(missing_ok=True)  # first: a kill from here on keeps this run's outputs
         shutil.rmtree(self.keep, ignore_errors=True)
         return False

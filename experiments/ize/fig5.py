@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from experiments.core.common import scene_kinds
 from experiments.core.store import atomic_write
 from experiments.ize.lib import memmodel
 from experiments.core.sweep import PAIRED_REPEATS, PAIRED_ROUNDS, paired_plane, sweep
@@ -33,7 +34,7 @@ THEORY = {"compact": (8 ** 0.2, 2.0), "skinny": (4 ** (1 / 3), 2.0)}
 
 
 def add_arguments(p) -> None:
-    p.add_argument("--scenes", default=None, help="comma-separated name:compact|skinny pairs")
+    p.add_argument("--scenes", type=scene_kinds, default=None, help="comma-separated name:compact|skinny pairs")
     p.add_argument("--kinds", default=",".join(KINDS), help="ray kinds, one panel each (default random,camera)")
     p.add_argument("--plane", choices=("default", "paper"), default="default",
                    help="default: c1 in 1, 1.5, 2, 3 x c2 in 1, 1.5, 2; paper: the 7 x 6 plane of earlier runs")
@@ -165,7 +166,7 @@ def main(ctx, args) -> int:
     import matplotlib.pyplot as plt
     started = time.time()
     threads = set_threads(args.threads or 1)
-    scenes = dict(s.split(":") for s in args.scenes.split(",")) if args.scenes else (QUICK if args.quick else SCENES)
+    scenes = args.scenes or (QUICK if args.quick else SCENES)
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
     c1s, c2s = (C1[1::2], C2[::2]) if args.quick else (C1, C2) if args.plane == "paper" else (C1_DEFAULT, C2_DEFAULT)
     n_rays = args.rays or (3_000 if args.quick else 100_000)

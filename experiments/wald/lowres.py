@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from experiments.core.common import add_image_args
+from experiments.core.common import add_image_args, side_list
 from experiments.core.figures import subplots
 from experiments.core.target import begin, run_quiet
 from experiments.wald.lib.packets import model_X, packet_work, pooled_fit
@@ -38,7 +38,7 @@ GOALS = {512: 1.2, 1024: 1.8}
 
 def add_arguments(p) -> None:
     add_image_args(p, "comma-separated scenes (default: bunny-69k, dragon-48k, dragon-202k, fandisk-x16)")
-    p.add_argument("--sides", default=None, help="comma-separated image sides (default 128,256,447,512,1024)")
+    p.add_argument("--sides", type=side_list, default=None, help="comma-separated image sides (default 128,256,447,512,1024)")
     p.add_argument("--repeats", type=int, default=None, help="interleaved rounds per side (default 5)")
 
 
@@ -76,7 +76,7 @@ def measure(scene, side: int, rounds: int) -> dict:
 
 def run(ctx, args, log=print) -> dict:
     tr = begin(ctx, args, "wald-lowres", (QUICK_SCENES, SCENES), threads=1, log=log)
-    sides = [int(s) for s in args.sides.split(",")] if args.sides else list(QUICK_SIDES if tr.quick else SIDES)
+    sides = args.sides or list(QUICK_SIDES if tr.quick else SIDES)
     rounds = args.repeats or 5
     rows = []
     for name, scene in tr.scenes("wald-lowres"):
