@@ -169,3 +169,20 @@ def test_a_quick_run_does_not_write_over_the_full_results(tmp_path, monkeypatch,
     assert "writes to results/quick" in capsys.readouterr().err
     assert (tmp_path / "results" / "derive" / "summary.md").read_text() == "full run\n"
     assert (tmp_path / "results" / "quick" / "derive" / "summary.md").exists()
+
+
+def test_a_point_stored_before_checksums_is_stale_not_altered(tmp_path, capsys):
+    """A point with no checksum (an older gridcost's) is measured again quietly, as a stale one."""
+    import json
+    from experiments.core.store import PointStore
+    store = PointStore(tmp_path)
+    params = {"scene": "s", "cells": 8}
+    store.put(params, {"x": 1})
+    path = store.dir / f"{store.key(params)}.json"
+    rec = json.loads(path.read_text())
+    del rec["sha"]
+    path.write_text(json.dumps(rec))
+    assert PointStore(tmp_path).measure(params, lambda: {"x": 2}) == ({"x": 2}, False)
+    assert capsys.readouterr().err == "" and not (store.dir / "set-aside").exists()
+    rec = json.loads(path.read_text())
+    assert rec["value"] == {"x": 2} and "sha" in rec

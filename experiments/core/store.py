@@ -171,7 +171,9 @@ class PointStore:
             return self._set_aside(p, f"unreadable ({type(exc).__name__})")
         if not (isinstance(rec, dict) and {"value", "key", "provenance"} <= set(rec)):
             return self._set_aside(p, "not a gridcost point (no value, key and provenance)")
-        if rec.get("sha") != _value_sha(rec["value"]):  # edited, or from a gridcost before the checksum
+        if "sha" not in rec:  # stored before points had a checksum: stale, as from other code
+            rec["key"] = None
+        elif rec["sha"] != _value_sha(rec["value"]):  # changed since it was stored
             return self._set_aside(p, "altered (its value does not match the checksum it was stored with)")
         return rec
 
