@@ -152,6 +152,8 @@ def _check_settings(args) -> str | None:
         if v != v or (lo is not None and v < lo) or (hi is not None and v > hi):
             span = f"at least {lo:g}" if hi is None else f"between {lo:g} and {hi:g}"
             return f"--{dest.replace('_', '-')} must be {span}, got {v:g}"
+    if getattr(args, "models", None) and not os.path.isdir(args.models):  # else every scene falls through to stand-ins
+        return f"--models must be a folder of meshes, got {args.models!r}"
     return None
 
 

@@ -14,6 +14,7 @@ from experiments.run import main
     (["table2", "--rays", "-5"], "--rays must be between 1 and"),
     (["table2", "--repeats", "0"], "--repeats must be between 1 and"),
     (["wald-fig6", "--side", "100000"], "--side must be between 1 and"),
+    (["derive", "--models", "/nonexistent/models"], "--models must be a folder of meshes"),
 ])
 def test_settings_out_of_range_are_refused(args, words, capsys, tmp_path):
     assert main(args + ["--out", str(tmp_path / "out")]) == 2
