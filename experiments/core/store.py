@@ -348,6 +348,7 @@ class OutputGuard:
             self._put_back(before["folder"], before["figs"])
             print(f"gridcost: {self.folder} put back as it was before an interrupted run", file=sys.stderr)
         shutil.rmtree(self.keep, ignore_errors=True)
+        self.made_parent = not self.keep.parent.exists()  # removed again if the run leaves it empty
         self.had_folder = self.folder.is_dir()
         self.old_figs = {}
         try:
@@ -402,4 +403,6 @@ class OutputGuard:
             self._put_back(self.had_folder, list(self.old_figs))
         (self.keep / "complete").unlink(missing_ok=True)  # first: a kill from here on keeps this run's outputs
         shutil.rmtree(self.keep, ignore_errors=True)
+        if self.made_parent and self.keep.parent.is_dir() and not any(self.keep.parent.iterdir()):  # no empty --out
+            self.keep.parent.rmdir()
         return False
