@@ -1,6 +1,7 @@
 """Shared CLI helpers of the experiment targets: scene selection, structure parameters, JSON output."""
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -25,7 +26,6 @@ def add_ray_args(p, scenes: str, rays: str, repeats: str | None = None) -> None:
 def side_list(text: str) -> list[int]:
     """argparse ``type`` of a comma-separated list of image sides (pixels, 1..16384): a bad one is
     refused by the parser with one line."""
-    import argparse
     try:
         sides = [int(s) for s in text.split(",")]
     except ValueError:
@@ -37,7 +37,6 @@ def side_list(text: str) -> list[int]:
 
 def scene_kinds(text: str) -> dict:
     """argparse ``type`` of comma-separated ``name:compact|skinny`` pairs."""
-    import argparse
     pairs = [s.split(":") for s in text.split(",")]
     if not all(len(p) == 2 and p[0] and p[1] in ("compact", "skinny") for p in pairs):
         raise argparse.ArgumentTypeError(f"expected comma-separated name:compact|skinny pairs, got {text!r}")

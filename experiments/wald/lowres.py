@@ -38,7 +38,8 @@ GOALS = {512: 1.2, 1024: 1.8}
 
 def add_arguments(p) -> None:
     add_image_args(p, "comma-separated scenes (default: bunny-69k, dragon-48k, dragon-202k, fandisk-x16)")
-    p.add_argument("--sides", type=side_list, default=None, help="comma-separated image sides (default 128,256,447,512,1024)")
+    p.add_argument("--sides", type=side_list, default=None,
+                   help="comma-separated image sides (default 128,256,447,512,1024)")
     p.add_argument("--repeats", type=int, default=None, help="interleaved rounds per side (default 5)")
 
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from tracer.errors import GridcostError
 from tracer.storage import atomic_savez, cache_root, load_cached_npz  # noqa: F401 (cache_root re-exported)
-from tracer.scenes.scenetype import Scene, validate
+from tracer.scenes.scenetype import Scene, validate, zero_area
 
 FORMATS = {".obj", ".ply", ".off", ".stl", ".glb", ".gltf"}
 CACHE_VERSION = 4  # 4: float32-collapse and truncated PLY/STL refusals (a v3 entry may hold such a mesh)
@@ -264,19 +264,13 @@ def load_mesh(path, name: str | None = None, use_cache: bool = True) -> Scene:
     return scene
 
 
-def _zero_area(t: np.ndarray) -> np.ndarray:
-    """Zero-area triangles, computed in float64 (as :func:`validate` does)."""
-    t = t.astype(np.float64, copy=False)
-    return np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) == 0
-
-
 def _float32_collapse(path: Path, t64: np.ndarray, tris: np.ndarray) -> int:
     """How many triangles the cast to float32 makes zero-area that were not in float64. Far from the
     origin for its size a mesh is destroyed by it (at 1e7 float32 steps by 1.0): over 1 % of the
     triangles is refused, as no answer about such a mesh is about the file's; fewer are reported."""
     if not len(tris) or not np.isfinite(t64).all():
         return 0  # empty or NaN/inf: validate refuses it
-    collapsed = int((_zero_area(tris) & ~_zero_area(t64)).sum())
+    collapsed = int((zero_area(tris) & ~zero_area(t64)).sum())
     if collapsed > 0.01 * len(tris):
         v = t64.reshape(-1, 3)
         raise GridcostError(f"{path}: {collapsed:,} of {len(tris):,} triangles collapse to zero area in float32 "

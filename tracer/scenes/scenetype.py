@@ -95,6 +95,12 @@ def scene_bounds(tris: np.ndarray) -> np.ndarray:
     return box
 
 
+def zero_area(tris: np.ndarray) -> np.ndarray:
+    """Which triangles of ``tris`` (n, 3, 3) have zero area, computed in float64."""
+    t = tris.astype(np.float64, copy=False)
+    return np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) == 0
+
+
 def validate(tris: np.ndarray, where: str) -> dict:
     """Refuse empty, non-finite and all-degenerate meshes; count (keep) zero-area triangles."""
     if tris.size == 0:
@@ -103,9 +109,7 @@ def validate(tris: np.ndarray, where: str) -> dict:
     if bad.any():
         raise GridcostError(f"{where}: {int(bad.sum())} triangles have NaN or inf vertices "
                             f"(first: triangle {int(np.flatnonzero(bad)[0])})")
-    t = tris.astype(np.float64)
-    area2 = np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    degenerate = int((area2 == 0).sum())
+    degenerate = int(zero_area(tris).sum())
     if degenerate == len(tris):
         raise GridcostError(f"{where}: all {degenerate:,} triangles are degenerate (zero area: collinear or repeated "
                             "vertices); no ray can hit this mesh")
